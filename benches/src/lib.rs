@@ -1,0 +1,2 @@
+//! Criterion benchmarks comparing the methods on the same scenes; the benches
+//! live in `benches/`. Run them with `cargo bench -p benches`.

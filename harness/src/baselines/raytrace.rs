@@ -1,0 +1,116 @@
+//! The ray-tracing baseline: the reference's own Monte-Carlo estimator at a low,
+//! fixed sample count — what a user would reach for today instead of any of the
+//! papers. A method is worth its complexity where it beats this at equal error
+//! (DESIGN.md, "Scoring").
+
+use glam::Vec3;
+use indicatif::ProgressBar;
+use shadow_core::{
+    Camera, Capabilities, Environment, Error, FrameGeometry, Image, Result, Scene, ShadowMethod,
+    VertexRadiance, bvh::SceneBvh, environment::EnvironmentSampler,
+};
+
+use crate::reference::{self, Estimator, ReferenceSettings};
+
+/// Monte-Carlo ray tracing with `iterations` MIS iterations per point (two
+/// shadow rays each at most).
+pub struct RayTrace {
+    name: String,
+    settings: ReferenceSettings,
+    scene: Option<Scene>,
+    frame: Option<(FrameGeometry, SceneBvh)>,
+    lighting: Option<(Environment, EnvironmentSampler)>,
+}
+
+impl RayTrace {
+    pub fn new(iterations: u32, seed: u64) -> RayTrace {
+        RayTrace {
+            name: format!("raytrace-{iterations}"),
+            settings: ReferenceSettings::fixed(iterations, seed),
+            scene: None,
+            frame: None,
+            lighting: None,
+        }
+    }
+
+    fn stage_error(&self, what: &str) -> Error {
+        Error::Stage {
+            method: self.name.clone(),
+            what: what.to_string(),
+        }
+    }
+
+    fn ready(&self) -> Result<(&Scene, &FrameGeometry, Estimator<'_>)> {
+        let scene = self
+            .scene
+            .as_ref()
+            .ok_or_else(|| self.stage_error("shade before prepare"))?;
+        let (frame, bvh) = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| self.stage_error("shade before update"))?;
+        let (environment, sampler) = self
+            .lighting
+            .as_ref()
+            .ok_or_else(|| self.stage_error("shade before relight"))?;
+        Ok((
+            scene,
+            frame,
+            Estimator {
+                bvh,
+                environment,
+                sampler,
+                offset: bvh.ray_offset(),
+            },
+        ))
+    }
+}
+
+impl ShadowMethod for RayTrace {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities::ALL
+    }
+
+    fn prepare(&mut self, scene: &Scene) -> Result<()> {
+        self.scene = Some(scene.clone());
+        self.frame = None;
+        Ok(())
+    }
+
+    /// Builds the BVH of the frame: all the visibility work that can be done
+    /// before rays are traced.
+    fn update(&mut self, frame: &FrameGeometry) -> Result<()> {
+        self.frame = Some((frame.clone(), SceneBvh::build(frame)?));
+        Ok(())
+    }
+
+    /// Builds the environment's sampling tables.
+    fn relight(&mut self, environment: &Environment) -> Result<()> {
+        self.lighting = Some((environment.clone(), EnvironmentSampler::new(environment)));
+        Ok(())
+    }
+
+    fn shade(&mut self, eye: Vec3) -> Result<VertexRadiance> {
+        let (scene, frame, estimator) = self.ready()?;
+        let points = reference::vertex_points(scene, frame, eye);
+        let est = reference::estimate(&points, &estimator, &self.settings, &ProgressBar::hidden());
+        Ok(reference::split_per_object(frame, &est))
+    }
+
+    fn render(&mut self, camera: &Camera) -> Result<Image> {
+        let (scene, frame, estimator) = self.ready()?;
+        let points = reference::pixel_points(scene, frame, estimator.bvh, camera);
+        Ok(reference::image_from_points(
+            camera,
+            &points,
+            &estimator,
+            &self.settings,
+            &ProgressBar::hidden(),
+        )
+        .0)
+    }
+}

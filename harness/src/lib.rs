@@ -1,0 +1,12 @@
+#![doc = include_str!("../README.md")]
+
+pub mod baselines;
+pub mod export;
+pub mod gltf;
+pub mod io;
+pub mod methods;
+pub mod reference;
+pub mod report;
+pub mod run;
+pub mod scenes;
+pub mod score;

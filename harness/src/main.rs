@@ -1,0 +1,318 @@
+//! The `harness` command: list scenes, compute references, run methods, and
+//! write the comparison report.
+
+use std::{
+    path::{Path, PathBuf},
+    time::Instant,
+};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use harness::{
+    export, methods,
+    reference::{self, ReferenceCache, ReferenceSettings},
+    report::{MachineInfo, ReferenceInfo, Report},
+    run,
+    scenes::{self, ENVIRONMENTS, SCENES},
+};
+use indicatif::{ProgressBar, ProgressStyle};
+use shadow_core::{Environment, Scene};
+
+#[derive(Parser)]
+#[command(
+    name = "harness",
+    about = "Compare soft-shadow methods against a Monte-Carlo reference"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List the built-in scenes, environments and methods.
+    List,
+    /// Compute (or load from the cache) the reference of a scene and print its noise.
+    Reference {
+        #[command(flatten)]
+        input: Input,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
+        /// Write per-vertex results of the first frame to this .csv or .json file.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Run one method on a scene: time per stage and error against the reference.
+    Run {
+        /// Method name (see `harness list`).
+        #[arg(long)]
+        method: String,
+        #[command(flatten)]
+        input: Input,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
+        /// Repeats per stage; medians are reported.
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// Write the method's per-vertex results of the last frame to this .csv or .json file.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Run every method on every built-in scene and write report.md and report.json.
+    Report {
+        /// Only these scenes (comma separated); default all.
+        #[arg(long, value_delimiter = ',')]
+        scenes: Vec<String>,
+        /// Where to write the report.
+        #[arg(long, default_value = "reports")]
+        dir: PathBuf,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+    },
+}
+
+#[derive(Args)]
+struct Input {
+    /// A built-in scene (see `harness list`).
+    #[arg(long, conflicts_with = "mesh", required_unless_present = "mesh")]
+    scene: Option<String>,
+    /// Your own glTF/GLB file instead of a built-in scene (white Lambert material).
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Frames to sample from the file's animation (with --mesh).
+    #[arg(long, default_value_t = 1)]
+    frames: usize,
+    /// An environment name (see `harness list`; `uniform` gives ambient occlusion)
+    /// or an OpenEXR file; default: the scene's own.
+    #[arg(long)]
+    env: Option<String>,
+}
+
+#[derive(Args)]
+struct EstimatorArgs {
+    /// Target relative L2 noise of the reference.
+    #[arg(long, default_value_t = 0.005)]
+    target: f32,
+    /// Seed of the reference's random streams.
+    #[arg(long, default_value_t = ReferenceSettings::CONVERGED.seed)]
+    seed: u64,
+    /// Where references are cached.
+    #[arg(long, default_value = ".cache/reference")]
+    cache: PathBuf,
+}
+
+impl EstimatorArgs {
+    fn settings(&self) -> ReferenceSettings {
+        ReferenceSettings {
+            seed: self.seed,
+            target_noise: Some(self.target),
+            ..ReferenceSettings::CONVERGED
+        }
+    }
+}
+
+impl Input {
+    fn load(&self) -> Result<(Scene, Environment)> {
+        let (scene, default_env) = match (&self.scene, &self.mesh) {
+            (Some(name), _) => {
+                let spec = SCENES.iter().find(|s| s.name == name);
+                (
+                    scenes::builtin(name)?,
+                    spec.map_or("uniform", |s| s.environment),
+                )
+            }
+            (None, Some(path)) => {
+                let name = path
+                    .file_stem()
+                    .map_or("mesh".into(), |s| s.to_string_lossy().into_owned());
+                (scenes::asset_scene(&name, path, self.frames)?, "uniform")
+            }
+            (None, None) => bail!("give --scene or --mesh"),
+        };
+        let env_name = self.env.as_deref().unwrap_or(default_env);
+        let env = scenes::environment(env_name)
+            .with_context(|| format!("loading environment {env_name}"))?;
+        Ok((scene, env))
+    }
+}
+
+fn progress(label: &str) -> ProgressBar {
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg:>24} [{elapsed_precise}] {wide_bar} {percent}% eta {eta}",
+        )
+        .expect("valid template"),
+    );
+    bar.set_message(label.to_string());
+    bar
+}
+
+fn references(
+    scene: &Scene,
+    env: &Environment,
+    args: &EstimatorArgs,
+) -> Result<(Vec<reference::VertexReference>, ReferenceInfo)> {
+    let bar = progress(&format!("reference {}", scene.name()));
+    let start = Instant::now();
+    let cache = ReferenceCache::new(&args.cache);
+    let (refs, cached) =
+        reference::scene_references(scene, env, &args.settings(), Some(&cache), &bar)?;
+    bar.finish_and_clear();
+    let info = ReferenceInfo {
+        scene: scene.name().to_string(),
+        environment: env.name().to_string(),
+        frames: refs.len(),
+        vertices: scene.vertex_count(),
+        noise: refs.iter().map(|r| r.noise).fold(0.0, f32::max),
+        rays: refs.iter().map(|r| r.rays).sum(),
+        seconds: if cached {
+            0.0
+        } else {
+            start.elapsed().as_secs_f64()
+        },
+        cached,
+    };
+    Ok((refs, info))
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::List => {
+            println!("scenes:");
+            for s in SCENES {
+                println!("  {:<10} ({}) {}", s.name, s.environment, s.shows);
+            }
+            println!(
+                "environments: {} (or a path to an .exr)",
+                ENVIRONMENTS.join(", ")
+            );
+            println!("methods:");
+            for (name, what) in methods::METHODS {
+                println!("  {name:<12} {what}");
+            }
+        }
+        Command::Reference {
+            input,
+            estimator,
+            out,
+        } => {
+            let (scene, env) = input.load()?;
+            let (refs, info) = references(&scene, &env, &estimator)?;
+            println!(
+                "{} under {}: {} frames, {} vertices, relative noise {:.3}%, {} rays, {}",
+                info.scene,
+                info.environment,
+                info.frames,
+                info.vertices,
+                info.noise * 100.0,
+                info.rays,
+                if info.cached {
+                    "from cache".to_string()
+                } else {
+                    format!("{:.1} s", info.seconds)
+                }
+            );
+            if let Some(path) = out {
+                export::write_vertices(&path, &scene.frame_geometry(0)?, &refs[0].radiance)?;
+                println!("wrote {}", path.display());
+            }
+        }
+        Command::Run {
+            method,
+            input,
+            estimator,
+            repeats,
+            out,
+        } => {
+            let (scene, env) = input.load()?;
+            let mut m = methods::by_name(&method)?;
+            let (refs, info) = references(&scene, &env, &estimator)?;
+            let result = run::run(m.as_mut(), &scene, &env, &refs, repeats)?;
+            println!(
+                "{} on {} under {} (reference noise {:.3}%)",
+                result.method,
+                result.scene,
+                result.environment,
+                info.noise * 100.0
+            );
+            println!("frame  error    p99      max      update ms  relight ms  shade ms");
+            for f in &result.frames {
+                println!(
+                    "{:>5}  {:>6.2}%  {:>6.1}%  {:>6.1}%  {:>9.2}  {:>10.2}  {:>8.2}",
+                    f.frame,
+                    f.error.relative_l2 * 100.0,
+                    f.error.p99 * 100.0,
+                    f.error.max * 100.0,
+                    f.times.update * 1e3,
+                    f.times.relight * 1e3,
+                    f.times.shade * 1e3
+                );
+            }
+            if let (Some(path), Some(shading)) = (out, &result.last_shading) {
+                let last = scene.frames().len() - 1;
+                export::write_vertices(&path, &scene.frame_geometry(last)?, shading)?;
+                println!("wrote {}", path.display());
+            }
+        }
+        Command::Report {
+            scenes: chosen,
+            dir,
+            estimator,
+            repeats,
+        } => {
+            let specs: Vec<_> = SCENES
+                .iter()
+                .filter(|s| chosen.is_empty() || chosen.iter().any(|c| c == s.name))
+                .collect();
+            if specs.is_empty() {
+                bail!("no built-in scene matches {chosen:?}");
+            }
+            let mut report = Report {
+                machine: MachineInfo::detect(None),
+                references: Vec::new(),
+                runs: Vec::new(),
+                skipped: Vec::new(),
+            };
+            for spec in specs {
+                let scene = scenes::builtin(spec.name)?;
+                let env = scenes::environment(spec.environment)?;
+                let (refs, info) = references(&scene, &env, &estimator)?;
+                report.references.push(info);
+                for name in methods::REPORT_METHODS {
+                    let mut m = methods::by_name(name)?;
+                    match run::run(m.as_mut(), &scene, &env, &refs, repeats) {
+                        Ok(result) => {
+                            eprintln!(
+                                "{:<10} {:<14} error {:.2}%",
+                                spec.name,
+                                name,
+                                result.mean_error() * 100.0
+                            );
+                            report.runs.push(result);
+                        }
+                        Err(e @ shadow_core::Error::Unsupported { .. }) => {
+                            report.skipped.push((
+                                name.to_string(),
+                                spec.name.to_string(),
+                                e.to_string(),
+                            ));
+                        }
+                        Err(e) => {
+                            return Err(e).with_context(|| format!("{name} on {}", spec.name));
+                        }
+                    }
+                }
+            }
+            report.write(&dir)?;
+            println!(
+                "wrote {} and {}",
+                dir.join("report.md").display(),
+                Path::new(&dir).join("report.json").display()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,40 @@
+//! The methods the harness can run, by name.
+
+use shadow_core::{Error, Result, ShadowMethod, sh::ShOrder};
+
+use crate::baselines::{RayTrace, Unshadowed};
+
+/// Names accepted by [`by_name`], with what each is.
+pub const METHODS: &[(&str, &str)] = &[
+    (
+        "unshadowed",
+        "SH lighting (order 9) with no visibility: the upper bound",
+    ),
+    (
+        "raytrace:N",
+        "Monte-Carlo ray tracing, N MIS iterations per vertex (e.g. raytrace:16)",
+    ),
+];
+
+/// The methods of the standard report.
+pub const REPORT_METHODS: &[&str] = &["unshadowed", "raytrace:4", "raytrace:16", "raytrace:64"];
+
+/// Builds a method from its name.
+pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
+    if name == "unshadowed" {
+        let order = ShOrder::new(9).expect("9 is a valid SH order");
+        return Ok(Box::new(Unshadowed::new(order)));
+    }
+    if let Some(n) = name.strip_prefix("raytrace:") {
+        let iterations: u32 = n.parse().ok().filter(|&i| i >= 2).ok_or_else(|| {
+            Error::InvalidScene(format!(
+                "raytrace:{n}: the iteration count must be an integer ≥ 2"
+            ))
+        })?;
+        return Ok(Box::new(RayTrace::new(iterations, 0xba5e)));
+    }
+    Err(Error::InvalidScene(format!(
+        "unknown method {name:?}; methods are {}",
+        METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
+    )))
+}

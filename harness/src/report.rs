@@ -1,0 +1,158 @@
+//! The comparison report: every method on every scene, time per stage and
+//! error against the reference, as JSON (for tools) and Markdown (for people).
+
+use std::{fmt::Write, path::Path};
+
+use serde::Serialize;
+use shadow_core::{Error, Result};
+
+use crate::{io::write_atomic, run::RunResult};
+
+/// Where and how the numbers were measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct MachineInfo {
+    pub cpu: String,
+    pub threads: usize,
+    /// The wgpu adapter the GPU methods ran on; `None` when no GPU method ran.
+    pub adapter: Option<String>,
+    pub profile: &'static str,
+}
+
+impl MachineInfo {
+    pub fn detect(adapter: Option<String>) -> MachineInfo {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split(':').nth(1))
+                    .map(|s| s.trim().to_string())
+            })
+            .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+        MachineInfo {
+            cpu,
+            threads: rayon::current_num_threads(),
+            adapter,
+            profile: if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            },
+        }
+    }
+}
+
+/// A scene's reference: how it was made and how noisy it is.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceInfo {
+    pub scene: String,
+    pub environment: String,
+    pub frames: usize,
+    pub vertices: usize,
+    /// Worst per-frame relative L2 noise.
+    pub noise: f32,
+    pub rays: u64,
+    /// Seconds spent computing it (0 when every frame came from the cache).
+    pub seconds: f64,
+    pub cached: bool,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub machine: MachineInfo,
+    pub references: Vec<ReferenceInfo>,
+    pub runs: Vec<RunResult>,
+    /// Method × scene pairs that could not run, and why.
+    pub skipped: Vec<(String, String, String)>,
+}
+
+impl Report {
+    /// Writes `report.json` and `report.md` into `dir`, atomically.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        let json = serde_json::to_vec_pretty(self)
+            .map_err(|e| Error::format(dir.join("report.json"), e.to_string()))?;
+        write_atomic(&dir.join("report.json"), &json)?;
+        write_atomic(&dir.join("report.md"), self.markdown().as_bytes())
+    }
+
+    pub fn markdown(&self) -> String {
+        let m = &self.machine;
+        let mut s = String::new();
+        let _ = writeln!(s, "# Soft-shadow methods compared\n");
+        let _ = writeln!(
+            s,
+            "Machine: {}, {} threads, {} build. GPU adapter: {}.\n",
+            m.cpu,
+            m.threads,
+            m.profile,
+            m.adapter
+                .as_deref()
+                .unwrap_or("none used (CPU methods only)")
+        );
+        let _ = writeln!(
+            s,
+            "Error is the relative L2 error over all vertices against the Monte-Carlo reference, \
+             averaged over frames; p99 and max are per-vertex relative errors (floor 1% of the RMS \
+             radiance); \"ref noise\" is the reference's own relative L2 noise, below which errors \
+             cannot be told apart. Times are medians of repeated runs, wall clock.\n"
+        );
+        let _ = writeln!(s, "## References\n");
+        let _ = writeln!(
+            s,
+            "| scene | environment | frames | vertices | noise | rays | seconds |"
+        );
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|");
+        for r in &self.references {
+            let secs = if r.cached {
+                "cached".to_string()
+            } else {
+                format!("{:.1}", r.seconds)
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {:.3}% | {} | {} |",
+                r.scene,
+                r.environment,
+                r.frames,
+                r.vertices,
+                r.noise * 100.0,
+                r.rays,
+                secs
+            );
+        }
+        let _ = writeln!(s, "\n## Methods\n");
+        let _ = writeln!(
+            s,
+            "| scene | method | error | p99 | max | prepare ms | update ms | relight ms | shade ms | frame ms |"
+        );
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for r in &self.runs {
+            let p99 = r.frames.iter().map(|f| f.error.p99).fold(0.0, f32::max);
+            let max = r.frames.iter().map(|f| f.error.max).fold(0.0, f32::max);
+            let t = |f: fn(&crate::run::StageTimes) -> f64| {
+                crate::run::median(r.frames.iter().map(|fr| f(&fr.times) * 1e3).collect())
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.2}% | {:.1}% | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                r.scene,
+                r.method,
+                r.mean_error() * 100.0,
+                p99 * 100.0,
+                max * 100.0,
+                t(|t| t.prepare),
+                t(|t| t.update),
+                t(|t| t.relight),
+                t(|t| t.shade),
+                r.frame_seconds() * 1e3,
+            );
+        }
+        if !self.skipped.is_empty() {
+            let _ = writeln!(s, "\n## Not run\n");
+            for (method, scene, why) in &self.skipped {
+                let _ = writeln!(s, "- {method} on {scene}: {why}");
+            }
+        }
+        s
+    }
+}

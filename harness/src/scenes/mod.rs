@@ -1,0 +1,216 @@
+//! The built-in scenes. Each exists to show something (DESIGN.md, "Scenes"):
+//! the furnace, an analytic occlusion case, a contact shadow on a coarse plane,
+//! a dense static mesh, a skinned character, an open mesh.
+
+pub mod shapes;
+
+use std::{
+    path::{Path, PathBuf},
+    sync::Arc,
+};
+
+use glam::{Affine3A, Vec3};
+use shadow_core::{
+    Aabb, Brdf, Camera, Environment, Error, Frame, Mesh, Object, Pose, Result, Scene,
+};
+
+use crate::gltf::GltfAsset;
+
+/// The folder holding the shipped meshes and environments: `assets/` at the
+/// workspace root, or `SHADOW_ASSETS` when set.
+pub fn assets_dir() -> PathBuf {
+    std::env::var_os("SHADOW_ASSETS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets"))
+}
+
+/// A built-in scene: its name, what it shows, and the environment it is meant
+/// to be seen under.
+#[derive(Clone, Copy, Debug)]
+pub struct SceneSpec {
+    pub name: &'static str,
+    pub shows: &'static str,
+    pub environment: &'static str,
+}
+
+/// Every built-in scene.
+pub const SCENES: &[SceneSpec] = &[
+    SceneSpec {
+        name: "furnace",
+        shows: "white furnace: a sphere, nothing occluding, uniform light; every method must return ρ",
+        environment: "uniform",
+    },
+    SceneSpec {
+        name: "wall",
+        shows: "a floor beside a wall: occlusion known exactly from Lambert's polygon form factor",
+        environment: "uniform",
+    },
+    SceneSpec {
+        name: "bunny",
+        shows: "contact shadow of a 1.8k-vertex bunny on a coarse two-triangle floor",
+        environment: "courtyard",
+    },
+    SceneSpec {
+        name: "bunny-35k",
+        shows: "a dense static scan (Sattler et al.'s 35k-vertex bunny)",
+        environment: "forest",
+    },
+    SceneSpec {
+        name: "human",
+        shows: "a skinned, animated human (the size of Kautz et al.'s 'Fight'), 6 frames",
+        environment: "sunset",
+    },
+    SceneSpec {
+        name: "teapot",
+        shows: "an open mesh with coarse, large triangles",
+        environment: "studio",
+    },
+];
+
+/// The environments shipped in `assets/environments/`, plus `uniform`.
+pub const ENVIRONMENTS: &[&str] = &[
+    "uniform",
+    "city",
+    "courtyard",
+    "forest",
+    "interior",
+    "night",
+    "studio",
+    "sunrise",
+    "sunset",
+];
+
+/// The white Lambert material of the standard scenes.
+pub fn white() -> Brdf {
+    Brdf::Lambert {
+        albedo: Vec3::splat(0.8),
+    }
+}
+
+/// Builds a built-in scene by name.
+pub fn builtin(name: &str) -> Result<Scene> {
+    let assets = assets_dir().join("meshes");
+    match name {
+        "furnace" => {
+            let sphere = shapes::uv_sphere("sphere", Vec3::ZERO, 1.0, 16, 32)?;
+            still(name, vec![sphere])
+        }
+        "wall" => {
+            let (floor, wall) = wall_scene()?;
+            still(name, vec![floor, wall])
+        }
+        "bunny" => on_floor(name, &assets.join("bunny_npm_1839v.glb"), 1),
+        "bunny-35k" => asset_scene(name, &assets.join("bunny_stanford_bun_zipper.glb"), 1),
+        "human" => asset_scene(name, &assets.join("BCN_Epileptic_skinned_animated.glb"), 6),
+        "teapot" => asset_scene(name, &assets.join("teapot_npm_792v.glb"), 1),
+        _ => Err(Error::InvalidScene(format!(
+            "unknown scene {name:?}; built-in scenes are {}",
+            SCENES.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+        ))),
+    }
+}
+
+/// Loads an environment by name (`uniform` or a shipped map) or from a path.
+pub fn environment(name_or_path: &str) -> Result<Environment> {
+    if name_or_path == "uniform" {
+        return Ok(Environment::uniform(Vec3::ONE));
+    }
+    let path = if ENVIRONMENTS.contains(&name_or_path) {
+        assets_dir()
+            .join("environments")
+            .join(format!("{name_or_path}.exr"))
+    } else {
+        PathBuf::from(name_or_path)
+    };
+    Environment::load_exr(&path)
+}
+
+/// The floor and wall of the analytic scene: a 4×4 m floor at y = 0 and a
+/// 1 m × 2 m wall standing on it at x = 0.5, facing −X toward the origin.
+pub fn wall_scene() -> Result<(Mesh, Mesh)> {
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 8)?;
+    let wall = shapes::grid(
+        "wall",
+        Vec3::new(0.5, 0.0, 1.0),
+        Vec3::Y,
+        Vec3::NEG_Z * 2.0,
+        4,
+        8,
+    )?;
+    Ok((floor, wall))
+}
+
+/// A scene from a glTF file, animated over at most `frames` frames, white
+/// Lambert, framed by a camera from the front right.
+pub fn asset_scene(name: &str, path: &Path, frames: usize) -> Result<Scene> {
+    let (objects, frames) = load_parts(path, frames)?;
+    framed(name, objects, frames)
+}
+
+/// An asset standing on a coarse two-triangle floor.
+fn on_floor(name: &str, path: &Path, frames: usize) -> Result<Scene> {
+    let (mut objects, mut frames) = load_parts(path, frames)?;
+    let bounds = first_frame_bounds(&objects, &frames);
+    let size = bounds.extent().max_element();
+    let center = Vec3::new(bounds.center().x, bounds.min.y, bounds.center().z);
+    let floor = shapes::floor("floor", center, size, 1)?;
+    objects.push(Object {
+        mesh: Arc::new(floor),
+        material: white(),
+    });
+    for f in &mut frames {
+        f.poses.push(Pose::Rigid(Affine3A::IDENTITY));
+    }
+    framed(name, objects, frames)
+}
+
+fn load_parts(path: &Path, frames: usize) -> Result<(Vec<Object>, Vec<Frame>)> {
+    let asset = GltfAsset::load(path)?;
+    asset.to_scene_parts(white(), 30.0, frames)
+}
+
+/// Static meshes at the identity pose.
+fn still(name: &str, meshes: Vec<Mesh>) -> Result<Scene> {
+    let objects: Vec<Object> = meshes
+        .into_iter()
+        .map(|m| Object {
+            mesh: Arc::new(m),
+            material: white(),
+        })
+        .collect();
+    let frames = vec![Frame {
+        time: 0.0,
+        poses: vec![Pose::Rigid(Affine3A::IDENTITY); objects.len()],
+    }];
+    framed(name, objects, frames)
+}
+
+/// A scene whose camera frames the first frame's bounds.
+fn framed(name: &str, objects: Vec<Object>, frames: Vec<Frame>) -> Result<Scene> {
+    let bounds = first_frame_bounds(&objects, &frames);
+    let camera = Camera::framing(
+        bounds.center(),
+        bounds.diagonal() * 0.5,
+        Vec3::new(0.8, 0.6, 1.0),
+        160,
+        120,
+    )?;
+    Scene::new(name, objects, frames, camera)
+}
+
+/// World bounds of every object in the first frame (empty without frames).
+fn first_frame_bounds(objects: &[Object], frames: &[Frame]) -> Aabb {
+    let Some(frame) = frames.first() else {
+        return Aabb::EMPTY;
+    };
+    objects
+        .iter()
+        .zip(&frame.poses)
+        .map(|(o, pose)| match pose {
+            Pose::Rigid(t) => {
+                Aabb::from_points(o.mesh.positions().iter().map(|p| t.transform_point3(*p)))
+            }
+            Pose::Deformed { positions, .. } => Aabb::from_points(positions.iter().copied()),
+        })
+        .fold(Aabb::EMPTY, Aabb::union)
+}

@@ -1,0 +1,113 @@
+//! Error against the reference (DESIGN.md, "Scoring").
+
+use glam::Vec3;
+use serde::Serialize;
+
+/// How far a method's values are from the reference's, over a domain (all
+/// vertices of a frame, or all covered pixels).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// `sqrt(Σ|x − r|² / Σ|r|²)` over the domain, on linear RGB.
+    pub relative_l2: f32,
+    /// 99th percentile of the per-element relative error.
+    pub p99: f32,
+    /// Largest per-element relative error.
+    pub max: f32,
+    /// The reference's own relative L2 noise, `sqrt(Σ|SE|² / Σ|r|²)`: errors
+    /// near this are indistinguishable from zero.
+    pub reference_noise: f32,
+    /// Elements compared.
+    pub count: usize,
+}
+
+/// Per-element relative errors divide by `max(|r|, FLOOR · rms(|r|))`, so that
+/// elements in near-total shadow (|r| → 0) do not turn a tiny absolute error
+/// into an enormous relative one; 1% of the domain's RMS radiance.
+pub const FLOOR: f32 = 0.01;
+
+/// Compares `values` with `reference` element by element; `std_error` is the
+/// reference's standard error per element, if known.
+pub fn compare(values: &[Vec3], reference: &[Vec3], std_error: Option<&[Vec3]>) -> ErrorStats {
+    assert_eq!(
+        values.len(),
+        reference.len(),
+        "compare: domains differ in size"
+    );
+    let sum_r2: f64 = reference.iter().map(|r| r.length_squared() as f64).sum();
+    let sum_d2: f64 = values
+        .iter()
+        .zip(reference)
+        .map(|(x, r)| (*x - *r).length_squared() as f64)
+        .sum();
+    let n = reference.len().max(1);
+    let floor = FLOOR * (sum_r2 / n as f64).sqrt() as f32;
+    let mut relative: Vec<f32> = values
+        .iter()
+        .zip(reference)
+        .map(|(x, r)| (*x - *r).length() / r.length().max(floor).max(f32::MIN_POSITIVE))
+        .collect();
+    relative.sort_unstable_by(f32::total_cmp);
+    let noise = std_error.map_or(0.0, |se| {
+        se.iter().map(|s| s.length_squared() as f64).sum::<f64>()
+    });
+    let ratio = |num: f64| {
+        if sum_r2 > 0.0 {
+            (num / sum_r2).sqrt() as f32
+        } else if num == 0.0 {
+            0.0
+        } else {
+            f32::INFINITY
+        }
+    };
+    ErrorStats {
+        relative_l2: ratio(sum_d2),
+        p99: percentile(&relative, 0.99),
+        max: relative.last().copied().unwrap_or(0.0),
+        reference_noise: ratio(noise),
+        count: reference.len(),
+    }
+}
+
+/// The `q` quantile of sorted values (nearest rank).
+fn percentile(sorted: &[f32], q: f64) -> f32 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn identical_values_score_zero() {
+        let r = vec![Vec3::ONE, Vec3::splat(2.0)];
+        let s = compare(&r, &r, None);
+        assert_eq!((s.relative_l2, s.p99, s.max), (0.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn uniform_ten_percent_error() {
+        let r: Vec<Vec3> = (1..=100).map(|i| Vec3::splat(i as f32)).collect();
+        let x: Vec<Vec3> = r.iter().map(|v| *v * 1.1).collect();
+        let s = compare(&x, &r, Some(&vec![Vec3::splat(0.01); 100]));
+        assert_relative_eq!(s.relative_l2, 0.1, epsilon = 1e-5);
+        assert_relative_eq!(s.p99, 0.1, epsilon = 1e-5);
+        assert_relative_eq!(s.max, 0.1, epsilon = 1e-5);
+        assert!(s.reference_noise > 0.0 && s.reference_noise < 0.01);
+    }
+
+    #[test]
+    fn dark_elements_use_the_floor() {
+        let mut r = vec![Vec3::ONE; 99];
+        r.push(Vec3::ZERO);
+        let mut x = r.clone();
+        x[99] = Vec3::splat(0.001);
+        let s = compare(&x, &r, None);
+        // |x − r| = 0.0017, floor = 0.01 · rms ≈ 0.00995 ⇒ relative ≈ 0.17, not ∞.
+        assert!(s.max > 0.1 && s.max < 0.2, "{}", s.max);
+    }
+}

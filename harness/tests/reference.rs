@@ -1,0 +1,328 @@
+//! The Monte-Carlo reference against cases whose answer is known exactly.
+
+use std::sync::Arc;
+
+use glam::{Affine3A, Mat3, Vec3};
+use harness::{
+    baselines::Unshadowed,
+    reference::{self, ReferenceSettings, Setup, ShadingPoint},
+    scenes::{self, shapes},
+};
+use indicatif::ProgressBar;
+use proptest::prelude::*;
+use shadow_core::{
+    Brdf, Camera, Environment, Frame, Mesh, Object, Pose, Scene, ShadowMethod, sh::ShOrder,
+};
+
+fn camera() -> Camera {
+    Camera::new(Vec3::new(3.0, 2.0, 4.0), Vec3::ZERO, Vec3::Y, 0.8, 32, 24).unwrap()
+}
+
+fn white(rho: f32) -> Brdf {
+    Brdf::lambert(Vec3::splat(rho)).unwrap()
+}
+
+fn scene_of(meshes: Vec<Mesh>, rho: f32) -> Scene {
+    let objects = meshes
+        .into_iter()
+        .map(|m| Object {
+            mesh: Arc::new(m),
+            material: white(rho),
+        })
+        .collect();
+    Scene::still("test", objects, camera()).unwrap()
+}
+
+fn fixed(iterations: u32) -> ReferenceSettings {
+    ReferenceSettings::fixed(iterations, 42)
+}
+
+/// Asserts |x − expected| ≤ 4 SE + slack, channel by channel.
+fn assert_within(x: Vec3, se: Vec3, expected: Vec3, slack: f32, what: &str) {
+    for c in 0..3 {
+        let bound = 4.0 * se[c] + slack;
+        assert!(
+            (x[c] - expected[c]).abs() <= bound,
+            "{what}: {x} vs {expected} (SE {se}, bound {bound})"
+        );
+    }
+}
+
+#[test]
+fn white_furnace_gives_albedo_for_reference_and_unshadowed() {
+    let rho = 0.7;
+    let scene = scene_of(
+        vec![shapes::uv_sphere("sphere", Vec3::ZERO, 1.0, 8, 16).unwrap()],
+        rho,
+    );
+    let env = Environment::uniform(Vec3::ONE);
+    let frame = scene.frame_geometry(0).unwrap();
+    let r = reference::vertex_reference(
+        &scene,
+        &frame,
+        &env,
+        scene.camera().eye,
+        &fixed(64),
+        &ProgressBar::hidden(),
+    )
+    .unwrap();
+    let se = r.radiance.std_error.as_ref().unwrap();
+    for (x, s) in r.radiance.flat().zip(se.iter().flatten()) {
+        assert_within(x, *s, Vec3::splat(rho), 1e-4, "reference");
+    }
+
+    let mut unshadowed = Unshadowed::new(ShOrder::new(5).unwrap());
+    unshadowed.prepare(&scene).unwrap();
+    unshadowed.update(&frame).unwrap();
+    unshadowed.relight(&env).unwrap();
+    for x in unshadowed.shade(scene.camera().eye).unwrap().flat() {
+        approx::assert_relative_eq!(x, Vec3::splat(rho), max_relative = 1e-4);
+    }
+}
+
+/// Lambert's formula: the form factor from a differential area at the origin
+/// with normal `n` to a polygon wholly above its tangent plane,
+/// F = (1/2π) |Σ_i Θ_i γ_i·n| (Θ_i the angle an edge subtends, γ_i the unit
+/// normal of the plane through the edge and the point).
+fn polygon_form_factor(point: Vec3, n: Vec3, polygon: &[Vec3]) -> f32 {
+    let mut sum = 0.0;
+    for i in 0..polygon.len() {
+        let a = (polygon[i] - point).normalize();
+        let b = (polygon[(i + 1) % polygon.len()] - point).normalize();
+        let theta = a.dot(b).clamp(-1.0, 1.0).acos();
+        sum += theta * a.cross(b).normalize().dot(n);
+    }
+    (sum / std::f32::consts::TAU).abs()
+}
+
+#[test]
+fn floor_beside_a_wall_matches_lamberts_formula() {
+    let (floor, wall) = scenes::wall_scene().unwrap();
+    let corners: Vec<Vec3> = {
+        let b = wall.bounds();
+        vec![
+            Vec3::new(b.min.x, b.min.y, b.min.z),
+            Vec3::new(b.min.x, b.max.y, b.min.z),
+            Vec3::new(b.min.x, b.max.y, b.max.z),
+            Vec3::new(b.min.x, b.min.y, b.max.z),
+        ]
+    };
+    let rho = 0.8;
+    let scene = scene_of(vec![floor, wall], rho);
+    let env = Environment::uniform(Vec3::ONE);
+    let frame = scene.frame_geometry(0).unwrap();
+    let r = reference::vertex_reference(
+        &scene,
+        &frame,
+        &env,
+        scene.camera().eye,
+        &fixed(256),
+        &ProgressBar::hidden(),
+    )
+    .unwrap();
+    let se = &r.radiance.std_error.as_ref().unwrap()[0];
+    let mut checked = 0;
+    for (v, p) in frame.objects[0].positions().iter().enumerate() {
+        // Skip the line under the wall, where the answer is singular.
+        if (p.x - 0.5).abs() < 0.1 {
+            continue;
+        }
+        let expected = rho * (1.0 - polygon_form_factor(*p, Vec3::Y, &corners));
+        assert_within(
+            r.radiance.radiance[0][v],
+            se[v],
+            Vec3::splat(expected),
+            2e-3,
+            &format!("floor vertex {v} at {p}"),
+        );
+        checked += 1;
+    }
+    assert!(checked > 40);
+}
+
+#[test]
+fn centre_of_a_closed_box_is_black() {
+    let room = shapes::cuboid("room", Vec3::splat(-1.0), Vec3::splat(1.0), true).unwrap();
+    let scene = scene_of(vec![room], 0.8);
+    let env = Environment::uniform(Vec3::ONE);
+    let frame = scene.frame_geometry(0).unwrap();
+    let setup = Setup::new(&frame, &env).unwrap();
+    let point = ShadingPoint {
+        position: Vec3::new(0.0, -1.0, 0.0),
+        normal: Vec3::Y,
+        view: Vec3::Y,
+        material: white(0.8),
+    };
+    let est = reference::estimate(
+        &[point],
+        &setup.estimator(&env),
+        &fixed(2000),
+        &ProgressBar::hidden(),
+    );
+    assert_eq!(est.mean[0], Vec3::ZERO);
+    assert!(est.rays > 2000);
+}
+
+#[test]
+fn same_seed_same_result_and_adaptive_runs_reach_their_target() {
+    let scene = scenes::builtin("wall").unwrap();
+    let env = Environment::uniform(Vec3::ONE);
+    let frame = scene.frame_geometry(0).unwrap();
+    let eye = scene.camera().eye;
+    let settings = ReferenceSettings {
+        target_noise: Some(0.01),
+        min_iterations: 16,
+        max_iterations: 1 << 14,
+        seed: 3,
+    };
+    let a =
+        reference::vertex_reference(&scene, &frame, &env, eye, &settings, &ProgressBar::hidden())
+            .unwrap();
+    let b =
+        reference::vertex_reference(&scene, &frame, &env, eye, &settings, &ProgressBar::hidden())
+            .unwrap();
+    assert_eq!(a.radiance.radiance, b.radiance.radiance);
+    assert!(a.noise <= 0.01, "noise {}", a.noise);
+    assert!(
+        a.iterations.iter().any(|&i| i > 16),
+        "adaptivity never added samples"
+    );
+}
+
+#[test]
+fn reference_cache_round_trips_and_rejects_corruption() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = reference::ReferenceCache::new(dir.path());
+    let scene = scene_of(
+        vec![shapes::uv_sphere("s", Vec3::ZERO, 1.0, 6, 12).unwrap()],
+        0.5,
+    );
+    let env = Environment::uniform(Vec3::ONE);
+    let settings = fixed(8);
+    let bar = ProgressBar::hidden();
+    let (first, cached) =
+        reference::scene_references(&scene, &env, &settings, Some(&cache), &bar).unwrap();
+    assert!(!cached);
+    let (second, cached) =
+        reference::scene_references(&scene, &env, &settings, Some(&cache), &bar).unwrap();
+    assert!(cached);
+    assert_eq!(first[0].radiance.radiance, second[0].radiance.radiance);
+    assert_eq!(first[0].iterations, second[0].iterations);
+
+    // Corrupt every cache file: the reference is recomputed, not trusted.
+    for entry in std::fs::read_dir(dir.path()).unwrap() {
+        let path = entry.unwrap().path();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let mid = bytes.len() / 2;
+        bytes[mid] ^= 0xff;
+        std::fs::write(&path, &bytes[..bytes.len() - 3]).unwrap();
+    }
+    let (third, cached) =
+        reference::scene_references(&scene, &env, &settings, Some(&cache), &bar).unwrap();
+    assert!(!cached);
+    assert_eq!(first[0].radiance.radiance, third[0].radiance.radiance);
+}
+
+/// A floor with a few tilted blocker triangles above it, all inside the floor's
+/// bounds (so the ray offset, which scales with the bounds, is unchanged).
+fn floor_with_blockers(blockers: &[(Vec3, f32)]) -> Scene {
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 4).unwrap();
+    let mut meshes = vec![floor];
+    for (i, (c, s)) in blockers.iter().enumerate() {
+        let tri = Mesh::new(
+            format!("blocker{i}"),
+            vec![
+                *c,
+                *c + Vec3::new(*s, 0.1, 0.0),
+                *c + Vec3::new(0.0, 0.05, *s),
+            ],
+            None,
+            vec![[0, 1, 2]],
+        )
+        .unwrap();
+        meshes.push(tri);
+    }
+    // A tiny marker high above a corner pins the bounds, so the ray offset
+    // (which scales with the bounds' diagonal) does not depend on the blockers.
+    let marker = Mesh::new(
+        "marker",
+        vec![
+            Vec3::new(-1.0, 1.0, -1.0),
+            Vec3::new(-1.0, 1.0, -0.99),
+            Vec3::new(-0.99, 1.0, -1.0),
+        ],
+        None,
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
+    meshes.push(marker);
+    scene_of(meshes, 0.9)
+}
+
+fn sky() -> Environment {
+    // A smooth sky: brighter toward +Y and toward +X, every texel positive.
+    let (w, h) = (64, 32);
+    let texels = (0..w * h)
+        .map(|i| {
+            let theta = std::f32::consts::PI * ((i / w) as f32 + 0.5) / h as f32;
+            let phi = std::f32::consts::TAU * ((i % w) as f32 + 0.5) / w as f32;
+            let d = shadow_core::environment::direction_from_angles(theta, phi);
+            Vec3::new(
+                1.0 + d.y.max(0.0) * 3.0,
+                1.0 + d.x.max(0.0),
+                0.5 + 0.5 * d.z.abs(),
+            )
+        })
+        .collect();
+    Environment::new("sky", w, h, texels).unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+
+    /// Paired samples (same seed, same streams): adding a blocker can only turn
+    /// visible directions into occluded ones, so no vertex gets brighter.
+    #[test]
+    fn adding_a_blocker_never_brightens(
+        x in -0.9f32..0.5, z in -0.9f32..0.5, y in 0.05f32..0.6, s in 0.1f32..0.5,
+        x2 in -0.9f32..0.5, z2 in -0.9f32..0.5,
+    ) {
+        let env = sky();
+        let before = floor_with_blockers(&[(Vec3::new(x, y, z), s)]);
+        let after = floor_with_blockers(&[(Vec3::new(x, y, z), s), (Vec3::new(x2, y * 0.5, z2), s)]);
+        let settings = fixed(16);
+        let eye = before.camera().eye;
+        let bar = ProgressBar::hidden();
+        let a = reference::vertex_reference(&before, &before.frame_geometry(0).unwrap(), &env, eye, &settings, &bar).unwrap();
+        let b = reference::vertex_reference(&after, &after.frame_geometry(0).unwrap(), &env, eye, &settings, &bar).unwrap();
+        prop_assert!(a.radiance.radiance[0].len() == b.radiance.radiance[0].len());
+        for (va, vb) in a.radiance.radiance[0].iter().zip(&b.radiance.radiance[0]) {
+            prop_assert!(vb.cmple(*va + Vec3::splat(1e-6)).all(), "{vb} > {va}");
+        }
+    }
+
+    /// Rotating the scene and the environment together changes nothing but the
+    /// noise: the estimates agree within their joint error bars.
+    #[test]
+    fn invariant_when_scene_and_lighting_rotate_together(columns in 1usize..63) {
+        let env = sky();
+        let angle = std::f32::consts::TAU * columns as f32 / env.width() as f32;
+        let rotation = Mat3::from_rotation_y(angle);
+        let scene = floor_with_blockers(&[(Vec3::new(0.1, 0.2, -0.1), 0.4)]);
+        let poses = vec![Pose::Rigid(Affine3A::from_mat3(rotation)); scene.objects().len()];
+        let rotated = Scene::new("rotated", scene.objects().to_vec(), vec![Frame { time: 0.0, poses }], camera()).unwrap();
+        let settings = fixed(64);
+        let bar = ProgressBar::hidden();
+        let eye = Vec3::Y * 10.0; // on the rotation axis, so the view rotates too
+        let a = reference::vertex_reference(&scene, &scene.frame_geometry(0).unwrap(), &env, eye, &settings, &bar).unwrap();
+        let b = reference::vertex_reference(&rotated, &rotated.frame_geometry(0).unwrap(), &env.rotated(rotation), eye, &settings, &bar).unwrap();
+        let (sa, sb) = (a.radiance.std_error.unwrap(), b.radiance.std_error.unwrap());
+        for v in 0..a.radiance.radiance[0].len() {
+            let (x, y) = (a.radiance.radiance[0][v], b.radiance.radiance[0][v]);
+            let joint = (sa[0][v] * sa[0][v] + sb[0][v] * sb[0][v]).powf(0.5);
+            for c in 0..3 {
+                prop_assert!((x[c] - y[c]).abs() <= 5.0 * joint[c] + 1e-4, "vertex {v}: {x} vs {y}, joint SE {joint}");
+            }
+        }
+    }
+}

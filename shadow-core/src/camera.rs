@@ -1,0 +1,122 @@
+//! A pinhole camera: where the viewer is, and the pixels of an image.
+
+use glam::{Mat4, Vec3};
+use serde::Serialize;
+
+use crate::{Error, Result};
+
+/// A perspective pinhole camera looking from `eye` at `target`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view in radians.
+    pub fov_y: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Camera {
+    /// A camera, rejecting a zero-size image, a degenerate frame (eye on target,
+    /// up parallel to the view direction) or a field of view outside (0, π).
+    pub fn new(
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        fov_y: f32,
+        width: u32,
+        height: u32,
+    ) -> Result<Camera> {
+        let forward = target - eye;
+        if width == 0 || height == 0 {
+            return Err(Error::InvalidScene(format!(
+                "camera image {width}×{height} is empty"
+            )));
+        }
+        if !(fov_y > 0.0 && fov_y < std::f32::consts::PI) {
+            return Err(Error::InvalidScene(format!(
+                "camera field of view {fov_y} rad is outside (0, π)"
+            )));
+        }
+        if !eye.is_finite()
+            || !target.is_finite()
+            || forward.cross(up).length_squared() <= 1e-12 * forward.length_squared()
+        {
+            return Err(Error::InvalidScene(format!(
+                "camera frame is degenerate (eye {eye}, target {target}, up {up})"
+            )));
+        }
+        Ok(Camera {
+            eye,
+            target,
+            up,
+            fov_y,
+            width,
+            height,
+        })
+    }
+
+    /// A camera framing a bounding sphere from direction `from` (pointing from
+    /// the centre to the eye), +Y up, 40° vertical field of view.
+    pub fn framing(
+        center: Vec3,
+        radius: f32,
+        from: Vec3,
+        width: u32,
+        height: u32,
+    ) -> Result<Camera> {
+        let fov_y = 40f32.to_radians();
+        let distance = radius / (fov_y * 0.5).sin() * 1.05;
+        let from = from.normalize_or(Vec3::Z);
+        let up = if from.cross(Vec3::Y).length_squared() < 1e-6 {
+            Vec3::Z
+        } else {
+            Vec3::Y
+        };
+        Camera::new(center + from * distance, center, up, fov_y, width, height)
+    }
+
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+
+    pub fn view(&self) -> Mat4 {
+        glam::camera::rh::view::look_at_mat4(self.eye, self.target, self.up)
+    }
+
+    /// The unit direction of the ray through the centre of pixel (x, y), pixel
+    /// (0, 0) at the top left.
+    pub fn ray_direction(&self, x: u32, y: u32) -> Vec3 {
+        let forward = (self.target - self.eye).normalize();
+        let right = forward.cross(self.up).normalize();
+        let up = right.cross(forward);
+        let half_h = (self.fov_y * 0.5).tan();
+        let half_w = half_h * self.aspect();
+        let sx = ((x as f32 + 0.5) / self.width as f32 * 2.0 - 1.0) * half_w;
+        let sy = (1.0 - (y as f32 + 0.5) / self.height as f32 * 2.0) * half_h;
+        (forward + right * sx + up * sy).normalize()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn centre_ray_looks_at_target_and_top_row_looks_up() {
+        let cam =
+            Camera::new(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 1.0, 101, 101).unwrap();
+        assert_relative_eq!(cam.ray_direction(50, 50), Vec3::NEG_Z, epsilon = 1e-6);
+        assert!(cam.ray_direction(50, 0).y > 0.0);
+        assert!(cam.ray_direction(100, 50).x > 0.0);
+    }
+
+    #[test]
+    fn degenerate_cameras_are_rejected() {
+        assert!(Camera::new(Vec3::ZERO, Vec3::ZERO, Vec3::Y, 1.0, 8, 8).is_err());
+        assert!(Camera::new(Vec3::Y, Vec3::ZERO, Vec3::Y, 1.0, 8, 8).is_err());
+        assert!(Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 0, 8).is_err());
+    }
+}

@@ -1,0 +1,73 @@
+//! The one error type every crate of the workspace speaks.
+
+use std::path::PathBuf;
+
+use crate::method::Capability;
+
+/// Everything that can go wrong in shadow-core and the method crates.
+///
+/// Errors about input name the input (a file path, or the object and element
+/// index) and what is wrong with it, so that a user can fix the file rather than
+/// guess.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A mesh failed validation.
+    #[error("invalid mesh {name:?}: {what}")]
+    InvalidMesh { name: String, what: String },
+
+    /// An environment map failed validation.
+    #[error("invalid environment {source_name:?}: {what}")]
+    InvalidEnvironment { source_name: String, what: String },
+
+    /// A scene is not usable (no objects, mismatched frames, ...).
+    #[error("invalid scene: {0}")]
+    InvalidScene(String),
+
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// A file was read but its format is malformed or unsupported.
+    #[error("{path}: {what}")]
+    Format { path: PathBuf, what: String },
+
+    /// A method was asked for something it cannot do.
+    #[error("{method} does not support {capability}")]
+    Unsupported {
+        method: String,
+        capability: Capability,
+    },
+
+    /// A method stage was called out of order (e.g. `shade` before `update`).
+    #[error("{method}: {what}")]
+    Stage { method: String, what: String },
+
+    /// No GPU adapter, device loss, shader or read-back failure.
+    #[error("GPU: {0}")]
+    Gpu(String),
+}
+
+/// Result with the workspace's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A format error on `path`.
+    pub fn format(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
+        Error::Format {
+            path: path.into(),
+            what: what.into(),
+        }
+    }
+}

@@ -1,0 +1,30 @@
+#![doc = include_str!("../README.md")]
+//!
+//! Conventions (DESIGN.md): right-handed, +Y up, metres, counter-clockwise
+//! front faces; environments are equirectangular maps of linear radiance with
+//! row 0 at the top; every method returns the outgoing radiance of direct
+//! distant lighting with visibility from every object,
+//! `L_o(x, v) = ∫ L_env(ω) V(x, ω) f_r(ω, v) max(0, n·ω) dω`.
+
+mod brdf;
+mod camera;
+pub mod environment;
+mod error;
+mod mesh;
+mod method;
+pub mod raster;
+mod scene;
+pub mod sh;
+
+#[cfg(feature = "bvh")]
+pub mod bvh;
+#[cfg(feature = "gpu")]
+pub mod gpu;
+
+pub use brdf::{Brdf, reflect};
+pub use camera::Camera;
+pub use environment::{Environment, EnvironmentReport};
+pub use error::{Error, Result};
+pub use mesh::{Aabb, Adjacency, Mesh, MeshReport};
+pub use method::{Capabilities, Capability, Image, ShadowMethod, VertexRadiance};
+pub use scene::{Frame, FrameGeometry, Object, Pose, PosedObject, Scene};

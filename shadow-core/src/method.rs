@@ -1,0 +1,158 @@
+//! The `ShadowMethod` trait: the stages every method goes through, so that the
+//! harness can drive and time them all the same way (DESIGN.md).
+
+use std::fmt;
+
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::{Camera, Environment, Error, FrameGeometry, Result, Scene};
+
+/// Something a method may or may not support.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub enum Capability {
+    /// Meshes that change shape between frames (skinning, morphs, cloth).
+    DeformingMeshes,
+    /// Objects that move rigidly relative to each other.
+    RigidMotion,
+    /// Shadows cast between different objects.
+    MultipleObjects,
+    /// View-dependent (glossy) BRDFs.
+    GlossyBrdf,
+    /// Shading evaluated per pixel rather than interpolated from vertices.
+    PerPixel,
+}
+
+impl fmt::Display for Capability {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Capability::DeformingMeshes => "deforming meshes",
+            Capability::RigidMotion => "rigid motion",
+            Capability::MultipleObjects => "shadows between objects",
+            Capability::GlossyBrdf => "glossy BRDFs",
+            Capability::PerPixel => "per-pixel shading",
+        })
+    }
+}
+
+/// The set of capabilities a method has.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Capabilities {
+    pub deforming_meshes: bool,
+    pub rigid_motion: bool,
+    pub multiple_objects: bool,
+    pub glossy_brdf: bool,
+    pub per_pixel: bool,
+}
+
+impl Capabilities {
+    /// Everything.
+    pub const ALL: Capabilities = Capabilities {
+        deforming_meshes: true,
+        rigid_motion: true,
+        multiple_objects: true,
+        glossy_brdf: true,
+        per_pixel: true,
+    };
+
+    pub fn has(&self, capability: Capability) -> bool {
+        match capability {
+            Capability::DeformingMeshes => self.deforming_meshes,
+            Capability::RigidMotion => self.rigid_motion,
+            Capability::MultipleObjects => self.multiple_objects,
+            Capability::GlossyBrdf => self.glossy_brdf,
+            Capability::PerPixel => self.per_pixel,
+        }
+    }
+
+    /// The capabilities a scene needs to be shaded per vertex.
+    pub fn needed_by(scene: &Scene) -> Vec<Capability> {
+        let mut needed = Vec::new();
+        if scene.deforms() {
+            needed.push(Capability::DeformingMeshes);
+        }
+        if scene.moves() && !scene.deforms() {
+            needed.push(Capability::RigidMotion);
+        }
+        if scene.objects().len() > 1 {
+            needed.push(Capability::MultipleObjects);
+        }
+        if scene.objects().iter().any(|o| o.material.is_glossy()) {
+            needed.push(Capability::GlossyBrdf);
+        }
+        needed
+    }
+
+    /// An [`Error::Unsupported`] naming the first capability `scene` needs that
+    /// `method` lacks.
+    pub fn check(&self, method: &str, scene: &Scene) -> Result<()> {
+        match Capabilities::needed_by(scene)
+            .into_iter()
+            .find(|c| !self.has(*c))
+        {
+            None => Ok(()),
+            Some(capability) => Err(Error::Unsupported {
+                method: method.to_string(),
+                capability,
+            }),
+        }
+    }
+}
+
+/// Outgoing radiance per vertex of every object (linear RGB), with the standard
+/// error of each value when the method is a Monte-Carlo estimate.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct VertexRadiance {
+    /// `radiance[object][vertex]`.
+    pub radiance: Vec<Vec<Vec3>>,
+    /// `std_error[object][vertex]`, for stochastic methods.
+    pub std_error: Option<Vec<Vec<Vec3>>>,
+}
+
+impl VertexRadiance {
+    /// Every vertex value, objects one after another.
+    pub fn flat(&self) -> impl Iterator<Item = Vec3> + '_ {
+        self.radiance.iter().flatten().copied()
+    }
+}
+
+/// An image of outgoing radiance, row 0 at the top, with the pixels a surface
+/// covers (the others are background and are not scored).
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+    pub covered: Vec<bool>,
+    pub std_error: Option<Vec<Vec3>>,
+}
+
+/// A method for shading dynamic objects with soft shadows from distant
+/// environment lighting, driven through the stages of DESIGN.md.
+///
+/// Stages are called in order: `prepare` once per scene; then for each frame
+/// `update`, and whenever lighting changes `relight` (which must not redo
+/// visibility); then `shade` or `render` as often as views change. A stage
+/// called before the ones it needs returns [`Error::Stage`].
+pub trait ShadowMethod {
+    /// A short stable name used in reports and on the command line.
+    fn name(&self) -> &str;
+
+    fn capabilities(&self) -> Capabilities;
+
+    /// Once per scene: precomputation, tables, GPU pipelines. Fails with
+    /// [`Error::Unsupported`] if the scene needs a capability the method lacks.
+    fn prepare(&mut self, scene: &Scene) -> Result<()>;
+
+    /// Geometry changed: recompute visibility or transfer for this frame.
+    fn update(&mut self, frame: &FrameGeometry) -> Result<()>;
+
+    /// Lighting changed: must not recompute visibility.
+    fn relight(&mut self, environment: &Environment) -> Result<()>;
+
+    /// Outgoing radiance toward `eye` at every vertex of the current frame.
+    fn shade(&mut self, eye: Vec3) -> Result<VertexRadiance>;
+
+    /// An image of the current frame.
+    fn render(&mut self, camera: &Camera) -> Result<Image>;
+}
