@@ -18,14 +18,14 @@ fn shadow_rays(c: &mut Criterion) {
     let setup = Setup::new(&frame, &env).expect("BVH and sampler");
     let estimator = setup.estimator(&env);
     let points = reference::vertex_points(&scene, &frame, scene.camera().eye);
-    let settings = ReferenceSettings::fixed(4, 1);
+    let settings = ReferenceSettings::replicated(4, 2, 1);
     let bar = ProgressBar::hidden();
     let rays = reference::estimate(&points, &estimator, &settings, &bar).rays;
 
     let mut group = c.benchmark_group("reference");
     group.sample_size(10);
     group.throughput(Throughput::Elements(rays));
-    group.bench_function("bunny-35k forest, 4 MIS iterations per vertex", |b| {
+    group.bench_function("bunny-35k forest, 8 MIS iterations per vertex", |b| {
         b.iter(|| reference::estimate(&points, &estimator, &settings, &bar))
     });
     group.finish();

@@ -7,11 +7,11 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use shadow_core::{Environment, FrameGeometry, Result, Scene, VertexRadiance};
 
-use super::{ReferenceSettings, VertexReference};
+use super::{ReferenceSettings, VertexReference, split};
 use crate::io::write_atomic;
 
 /// Bumped whenever the estimator or the file layout changes meaning.
-const FORMAT: &[u8; 8] = b"SSREF002";
+const FORMAT: &[u8; 8] = b"SSREF003";
 
 /// The content hash of a vertex reference's inputs: geometry (positions,
 /// normals, triangles of every object), materials, the environment's texels,
@@ -85,7 +85,7 @@ impl ReferenceCache {
 }
 
 /// Layout: FORMAT, key (32), vertex count (u64), rays (u64), noise (f32),
-/// seconds (f64), means (n·Vec3), standard errors (n·Vec3), iterations (n·u32),
+/// seconds (f64), means (n·Vec3), standard errors (n·Vec3), replicates (n·u32),
 /// then the blake3 hash of everything before it.
 fn encode(key: &blake3::Hash, r: &VertexReference) -> Vec<u8> {
     let mean: Vec<Vec3> = r.radiance.flat().collect();
@@ -106,7 +106,7 @@ fn encode(key: &blake3::Hash, r: &VertexReference) -> Vec<u8> {
     out.extend_from_slice(&r.seconds.to_le_bytes());
     out.extend_from_slice(bytemuck::cast_slice(&mean));
     out.extend_from_slice(bytemuck::cast_slice(&se));
-    out.extend_from_slice(bytemuck::cast_slice(&r.iterations));
+    out.extend_from_slice(bytemuck::cast_slice(&r.replicates));
     let check = blake3::hash(&out);
     out.extend_from_slice(check.as_bytes());
     out
@@ -142,25 +142,16 @@ fn decode(bytes: &[u8], key: &blake3::Hash, shape: &FrameGeometry) -> Option<Ver
     };
     let mean = vec3s(take(n * 12)?);
     let se = vec3s(take(n * 12)?);
-    let iterations: Vec<u32> = take(n * 4)?
+    let replicates: Vec<u32> = take(n * 4)?
         .chunks_exact(4)
-        .map(|c| u32::from_le_bytes(c.try_into().unwrap_or_default()))
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
-    let mut radiance = Vec::new();
-    let mut std_error = Vec::new();
-    let mut start = 0;
-    for object in &shape.objects {
-        let end = start + object.vertex_count();
-        radiance.push(mean[start..end].to_vec());
-        std_error.push(se[start..end].to_vec());
-        start = end;
-    }
     Some(VertexReference {
         radiance: VertexRadiance {
-            radiance,
-            std_error: Some(std_error),
+            radiance: split(shape, &mean),
+            std_error: Some(split(shape, &se)),
         },
-        iterations,
+        replicates,
         rays,
         noise,
         seconds,

@@ -8,9 +8,18 @@
 //! importance sampling (p_e, [`EnvironmentSampler`]), and combines them with
 //! the balance heuristic (Veach 1997, §9.2): a sample ω of either strategy
 //! contributes f(ω) / (p_c(ω) + p_e(ω)). Both densities are non-zero wherever the
-//! integrand is, so the estimator is unbiased; each iteration is one
-//! independent, identically distributed draw, so the sample variance of the
-//! iterations gives an honest standard error.
+//! integrand is, so the estimator is unbiased.
+//!
+//! Iterations come in *replicates*: randomized quasi-Monte Carlo (Owen 1997;
+//! L'Ecuyer and Lemieux 2002). A replicate of M iterations feeds each
+//! strategy the first M points of the 2-D Sobol' sequence (van der Corput ×
+//! Sobol's second dimension, a (0,2)-sequence: each power-of-two prefix is
+//! stratified in every dyadic box), randomized by a random digital shift (XOR)
+//! per strategy. Every point is then uniform, so a replicate's mean is an
+//! unbiased estimate, and replicates with independent shifts are independent:
+//! the spread of replicate means gives an honest standard error, while the
+//! stratification inside a replicate removes most of the variance of plain
+//! Monte Carlo on smooth lighting.
 //!
 //! The environment is treated as piecewise constant per texel
 //! ([`Environment::texel_radiance`]), which is exactly the function the sampler
@@ -34,18 +43,20 @@ pub struct ShadingPoint {
     pub material: Brdf,
 }
 
-/// Running sums of iteration values, per channel, in f64.
+/// Running sums of replicate means, per channel, in f64.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Accumulator {
-    pub count: u32,
+    /// Replicates added.
+    pub replicates: u32,
     sum: [f64; 3],
     sum_sq: [f64; 3],
 }
 
 impl Accumulator {
+    /// Adds one replicate's mean.
     #[inline]
     pub fn add(&mut self, x: Vec3) {
-        self.count += 1;
+        self.replicates += 1;
         for c in 0..3 {
             let v = x[c] as f64;
             self.sum[c] += v;
@@ -54,22 +65,23 @@ impl Accumulator {
     }
 
     pub fn mean(&self) -> Vec3 {
-        let n = self.count.max(1) as f64;
+        let n = self.replicates.max(1) as f64;
         Vec3::from_array(self.sum.map(|s| (s / n) as f32))
     }
 
-    /// The standard error of the mean, from the unbiased sample variance.
-    pub fn std_error(&self) -> Vec3 {
-        if self.count < 2 {
-            return Vec3::INFINITY;
+    /// The standard error of the mean, from the unbiased sample variance of
+    /// the replicate means; `None` with fewer than two replicates.
+    pub fn std_error(&self) -> Option<Vec3> {
+        if self.replicates < 2 {
+            return None;
         }
-        let n = self.count as f64;
+        let n = self.replicates as f64;
         let se = |c: usize| {
             let mean = self.sum[c] / n;
             let var = ((self.sum_sq[c] / n - mean * mean) * n / (n - 1.0)).max(0.0);
             (var / n).sqrt() as f32
         };
-        Vec3::new(se(0), se(1), se(2))
+        Some(Vec3::new(se(0), se(1), se(2)))
     }
 }
 
@@ -83,24 +95,20 @@ pub struct Estimator<'a> {
 }
 
 impl Estimator<'_> {
-    /// Adds `iterations` MIS iterations at `point` to `acc`; returns the number
-    /// of shadow rays traced (directions with zero integrand cast none).
-    pub fn accumulate(
-        &self,
-        point: &ShadingPoint,
-        rng: &mut Pcg32,
-        iterations: u32,
-        acc: &mut Accumulator,
-    ) -> u64 {
+    /// One replicate of `size` MIS iterations at `point`, its digital shifts
+    /// drawn from `rng`; returns the replicate's mean and the number of shadow
+    /// rays traced (directions with zero integrand cast none).
+    pub fn replicate(&self, point: &ShadingPoint, rng: &mut Pcg32, size: u32) -> (Vec3, u64) {
         let n = point.normal;
         let (t, b) = n.any_orthonormal_pair();
         let origin = point.position + n * self.offset;
+        let cosine_shift = [rng.next_u32(), rng.next_u32()];
+        let env_shift = [rng.next_u32(), rng.next_u32()];
         let mut rays = 0u64;
-        for _ in 0..iterations {
-            let mut x = Vec3::ZERO;
-
+        let mut sum = Vec3::ZERO;
+        for i in 0..size {
             // Strategy 1: cosine-weighted hemisphere.
-            let local = cosine_hemisphere(uniform2(rng));
+            let local = cosine_hemisphere(sobol2(i, cosine_shift));
             let w = t * local.x + b * local.y + n * local.z;
             let cos = n.dot(w);
             if cos > 0.0 {
@@ -110,38 +118,49 @@ impl Estimator<'_> {
                     if f != Vec3::ZERO {
                         rays += 1;
                         if self.bvh.unoccluded(origin, w, f32::INFINITY) {
-                            x += f / (cos * FRAC_1_PI + self.sampler.pdf(w));
+                            sum += f / (cos * FRAC_1_PI + self.sampler.pdf(w));
                         }
                     }
                 }
             }
 
             // Strategy 2: the environment's own distribution.
-            let s = self.sampler.sample(uniform2(rng));
+            let s = self.sampler.sample(sobol2(i, env_shift));
             let cos = n.dot(s.dir);
             if cos > 0.0 && s.radiance != Vec3::ZERO {
                 let f = s.radiance * point.material.eval(n, s.dir, point.view) * cos;
                 if f != Vec3::ZERO {
                     rays += 1;
                     if self.bvh.unoccluded(origin, s.dir, f32::INFINITY) {
-                        x += f / (s.pdf + cos * FRAC_1_PI);
+                        sum += f / (s.pdf + cos * FRAC_1_PI);
                     }
                 }
             }
-            acc.add(x);
         }
-        rays
+        (sum / size.max(1) as f32, rays)
     }
 }
 
-/// Two uniform numbers in [0, 1).
+/// Point `i` of the 2-D Sobol' sequence under the digital shift `shift`, in
+/// [0, 1)². The first coordinate is the van der Corput radical inverse, the
+/// second Sobol's second dimension (Kollig and Keller 2002, "Efficient
+/// multidimensional sampling").
 #[inline]
-fn uniform2(rng: &mut Pcg32) -> Vec2 {
-    const SCALE: f32 = 1.0 / (1u32 << 24) as f32;
-    Vec2::new(
-        (rng.next_u32() >> 8) as f32 * SCALE,
-        (rng.next_u32() >> 8) as f32 * SCALE,
-    )
+fn sobol2(i: u32, shift: [u32; 2]) -> Vec2 {
+    let x = i.reverse_bits();
+    let mut y = 0u32;
+    let mut v = 1u32 << 31;
+    let mut bits = i;
+    while bits != 0 {
+        if bits & 1 != 0 {
+            y ^= v;
+        }
+        bits >>= 1;
+        v ^= v >> 1;
+    }
+    // The top 24 bits, so that the f32 value stays below 1.
+    let unit = |b: u32| (b >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+    Vec2::new(unit(x ^ shift[0]), unit(y ^ shift[1]))
 }
 
 /// Malley's method: a uniform disk sample lifted to the hemisphere (z up) has
@@ -154,16 +173,16 @@ fn cosine_hemisphere(u: Vec2) -> Vec3 {
     Vec3::new(r * c, r * s, (1.0 - u.x).max(0.0).sqrt())
 }
 
-/// The random stream of one (seed, point, round): independent of thread
+/// The random stream of one (seed, point, replicate): independent of thread
 /// scheduling, so results are deterministic for a seed.
-pub fn stream(seed: u64, point: usize, round: u32) -> Pcg32 {
+pub fn stream(seed: u64, point: usize, replicate: u32) -> Pcg32 {
     let mix = |mut z: u64| {
         // SplitMix64 finalizer.
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
         z ^ (z >> 31)
     };
-    let state = mix(seed ^ mix(point as u64 ^ ((round as u64) << 40)));
+    let state = mix(seed ^ mix(point as u64 ^ ((replicate as u64) << 40)));
     Pcg32::new(state, point as u64)
 }
 
@@ -175,28 +194,52 @@ mod tests {
     #[test]
     fn cosine_samples_have_mean_cosine_two_thirds() {
         let mut rng = stream(1, 0, 0);
-        let n = 200_000;
+        let shift = [rng.next_u32(), rng.next_u32()];
+        let n = 4096;
         let mean: f32 = (0..n)
-            .map(|_| cosine_hemisphere(uniform2(&mut rng)).z)
+            .map(|i| cosine_hemisphere(sobol2(i, shift)).z)
             .sum::<f32>()
             / n as f32;
-        // E[cos θ] under p = cos θ/π is 2/3.
-        assert_relative_eq!(mean, 2.0 / 3.0, epsilon = 3e-3);
+        // E[cos θ] under p = cos θ/π is 2/3; stratified points get very close.
+        assert_relative_eq!(mean, 2.0 / 3.0, epsilon = 1e-4);
+    }
+
+    #[test]
+    fn sobol_prefixes_are_stratified_in_every_dyadic_box() {
+        // A (0,2)-sequence: the first 2^m points put exactly one point in each
+        // box of area 2^-m, for every box shape, whatever the digital shift.
+        let shift = [0x1234_5678, 0x9abc_def0];
+        let m = 6;
+        for k in 0..=m {
+            let (nx, ny) = (1usize << k, 1usize << (m - k));
+            let mut boxes = vec![0; nx * ny];
+            for i in 0..(1u32 << m) {
+                let p = sobol2(i, shift);
+                boxes[(p.x * nx as f32) as usize * ny + (p.y * ny as f32) as usize] += 1;
+            }
+            assert!(boxes.iter().all(|&c| c == 1), "{nx}×{ny}: {boxes:?}");
+        }
     }
 
     #[test]
     fn accumulator_standard_error_matches_formula() {
         let mut acc = Accumulator::default();
-        for x in [1.0, 2.0, 3.0, 4.0] {
+        acc.add(Vec3::ONE);
+        assert_eq!(acc.std_error(), None);
+        for x in [2.0, 3.0, 4.0] {
             acc.add(Vec3::splat(x));
         }
         assert_relative_eq!(acc.mean(), Vec3::splat(2.5));
         // sample variance 5/3, SE = sqrt(5/3 / 4)
-        assert_relative_eq!(acc.std_error().x, (5.0f32 / 12.0).sqrt(), epsilon = 1e-6);
+        assert_relative_eq!(
+            acc.std_error().unwrap().x,
+            (5.0f32 / 12.0).sqrt(),
+            epsilon = 1e-6
+        );
     }
 
     #[test]
-    fn streams_differ_per_point_and_round() {
+    fn streams_differ_per_point_and_replicate() {
         let a = stream(7, 0, 0).next_u64();
         assert_ne!(a, stream(7, 1, 0).next_u64());
         assert_ne!(a, stream(7, 0, 1).next_u64());

@@ -13,7 +13,7 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use shadow_core::{
-    Camera, Environment, FrameGeometry, Image, Result, Scene, VertexRadiance, bvh::SceneBvh,
+    Camera, Environment, Error, FrameGeometry, Image, Result, Scene, VertexRadiance, bvh::SceneBvh,
     environment::EnvironmentSampler,
 };
 
@@ -25,33 +25,51 @@ pub use estimator::{Accumulator, Estimator, ShadingPoint, stream};
 pub struct ReferenceSettings {
     /// Seed of every random stream: same seed, same result.
     pub seed: u64,
-    /// MIS iterations per point in the first round (each iteration draws one
-    /// cosine and one environment sample).
-    pub min_iterations: u32,
-    /// No point gets more iterations than this.
-    pub max_iterations: u32,
-    /// Run until the relative L2 noise `sqrt(Σ|SE|² / Σ|L|²)` is at most this:
-    /// after each round, points whose |SE|² exceeds target² · mean(|L|²) get
-    /// twice their iterations (up to `max_iterations`). `None` runs exactly
-    /// `min_iterations` per point.
+    /// MIS iterations per replicate (each iteration draws one cosine and one
+    /// environment sample); a power of two keeps the Sobol' points stratified.
+    pub replicate_size: u32,
+    /// Replicates per point in the first round. Standard errors need two.
+    pub min_replicates: u32,
+    /// No point gets more replicates than this.
+    pub max_replicates: u32,
+    /// Run until the relative L2 noise `sqrt(Σ|SE|² / Σ|L|²)` is at most this,
+    /// giving each point the replicates its own variance calls for (see
+    /// [`allocate`]; at most `max_replicates`). `None` runs exactly
+    /// `min_replicates` per point.
     pub target_noise: Option<f32>,
 }
 
 impl ReferenceSettings {
-    /// A converged reference: 0.5% relative noise, at most 2²⁰ iterations a point.
+    /// A converged reference: 0.5% relative noise, replicates of 32
+    /// iterations, at most 2¹⁴ replicates (2¹⁹ iterations) a point.
     pub const CONVERGED: ReferenceSettings = ReferenceSettings {
         seed: 0x5eed,
-        min_iterations: 64,
-        max_iterations: 1 << 20,
+        replicate_size: 128,
+        min_replicates: 4,
+        max_replicates: 1 << 14,
         target_noise: Some(0.005),
     };
 
-    /// Exactly `iterations` per point, no adaptivity (the ray-tracing baseline).
+    /// Exactly `iterations` per point in one stratified replicate, no
+    /// adaptivity and no standard error (the ray-tracing baseline).
     pub fn fixed(iterations: u32, seed: u64) -> ReferenceSettings {
         ReferenceSettings {
             seed,
-            min_iterations: iterations,
-            max_iterations: iterations,
+            replicate_size: iterations,
+            min_replicates: 1,
+            max_replicates: 1,
+            target_noise: None,
+        }
+    }
+
+    /// `replicates` independent replicates of `size` iterations each, no
+    /// adaptivity: results carry standard errors.
+    pub fn replicated(size: u32, replicates: u32, seed: u64) -> ReferenceSettings {
+        ReferenceSettings {
+            seed,
+            replicate_size: size,
+            min_replicates: replicates,
+            max_replicates: replicates,
             target_noise: None,
         }
     }
@@ -61,87 +79,136 @@ impl ReferenceSettings {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Estimates {
     pub mean: Vec<Vec3>,
-    pub std_error: Vec<Vec3>,
-    pub iterations: Vec<u32>,
+    /// Standard errors, when every point had at least two replicates.
+    pub std_error: Option<Vec<Vec3>>,
+    /// Replicates per point.
+    pub replicates: Vec<u32>,
     /// Shadow rays traced in all.
     pub rays: u64,
 }
 
 impl Estimates {
     /// `sqrt(Σ|SE|² / Σ|L|²)`: the reference's own contribution to a relative
-    /// L2 error measured against it.
-    pub fn relative_noise(&self) -> f32 {
+    /// L2 error measured against it; `None` without standard errors.
+    pub fn relative_noise(&self) -> Option<f32> {
         let se: f64 = self
             .std_error
+            .as_ref()?
             .iter()
             .map(|s| s.length_squared() as f64)
             .sum();
         let signal: f64 = self.mean.iter().map(|m| m.length_squared() as f64).sum();
-        if signal == 0.0 {
+        Some(if signal == 0.0 {
             0.0
         } else {
             (se / signal).sqrt() as f32
-        }
+        })
     }
 }
 
-/// Runs the estimator at every point, in rounds, in parallel.
+/// Runs the estimator at every point, in rounds of replicates, in parallel.
 pub fn estimate(
     points: &[ShadingPoint],
     estimator: &Estimator,
     settings: &ReferenceSettings,
     progress: &ProgressBar,
 ) -> Estimates {
+    let size = settings.replicate_size.max(1);
     let mut acc = vec![Accumulator::default(); points.len()];
-    let mut budget = vec![settings.min_iterations.min(settings.max_iterations); points.len()];
+    let mut budget = vec![
+        settings
+            .min_replicates
+            .clamp(1, settings.max_replicates.max(1));
+        points.len()
+    ];
     let mut rays = 0u64;
-    progress.set_length(budget.iter().map(|&b| b as u64).sum());
-    for round in 0u32.. {
+    progress.set_length(budget.iter().map(|&b| b as u64 * size as u64).sum());
+    loop {
         rays += acc
             .par_iter_mut()
             .zip(points.par_iter())
             .zip(budget.par_iter())
             .enumerate()
-            .filter(|(_, ((a, _), b))| **b > a.count)
+            .filter(|(_, ((a, _), b))| **b > a.replicates)
             .map(|(i, ((a, p), &b))| {
-                let mut rng = stream(settings.seed, i, round);
-                let todo = b - a.count;
-                let r = estimator.accumulate(p, &mut rng, todo, a);
-                progress.inc(todo as u64);
-                r
+                let mut rays = 0;
+                progress.inc((b - a.replicates) as u64 * size as u64);
+                while a.replicates < b {
+                    let mut rng = stream(settings.seed, i, a.replicates);
+                    let (mean, r) = estimator.replicate(p, &mut rng, size);
+                    a.add(mean);
+                    rays += r;
+                }
+                rays
             })
             .sum::<u64>();
 
         let Some(target) = settings.target_noise else {
             break;
         };
-        let mean_sq = acc
-            .iter()
-            .map(|a| a.mean().length_squared() as f64)
-            .sum::<f64>()
-            / acc.len().max(1) as f64;
-        let threshold = (target as f64).powi(2) * mean_sq;
-        let mut more = 0u64;
-        for (a, b) in acc.iter().zip(budget.iter_mut()) {
-            if a.count < settings.max_iterations
-                && a.std_error().length_squared() as f64 > threshold
-            {
-                let next = (a.count * 2).min(settings.max_iterations);
-                more += (next - a.count) as u64;
-                *b = next;
-            }
-        }
+        let more = allocate(&acc, &mut budget, target, settings.max_replicates);
+        progress.inc_length(more * size as u64);
         if more == 0 {
             break;
         }
-        progress.inc_length(more);
     }
+    let std_error = acc.iter().map(Accumulator::std_error).collect();
     Estimates {
         mean: acc.iter().map(Accumulator::mean).collect(),
-        std_error: acc.iter().map(Accumulator::std_error).collect(),
-        iterations: acc.iter().map(|a| a.count).collect(),
+        std_error,
+        replicates: acc.iter().map(|a| a.replicates).collect(),
         rays,
     }
+}
+
+/// Sets each point's replicate budget for the next round so that the
+/// relative L2 noise reaches `target` with the fewest samples; returns how many
+/// replicates were added (0 when the target is met or no point can grow).
+///
+/// With σ_v the spread of one replicate at point v, n_v replicates leave a
+/// variance σ_v²/n_v; minimizing Σ n_v subject to Σ σ_v²/n_v ≤ T, with
+/// T = target² · Σ|L_v|², gives n_v = σ_v · Σσ_u / T (Neyman allocation):
+/// noisy points get more replicates, but not so many that every point reaches
+/// the same error. Budgets grow by at most 8× a round, because a σ estimated
+/// from few replicates is itself noisy, and by 20% beyond the estimate.
+fn allocate(acc: &[Accumulator], budget: &mut [u32], target: f32, max_replicates: u32) -> u64 {
+    let signal: f64 = acc.iter().map(|a| a.mean().length_squared() as f64).sum();
+    let variance: f64 = acc
+        .iter()
+        .map(|a| {
+            a.std_error()
+                .map_or(f64::INFINITY, |se| se.length_squared() as f64)
+        })
+        .sum();
+    let allowed = (target as f64).powi(2) * signal;
+    if variance <= allowed {
+        return 0;
+    }
+    // σ_v = SE_v · √R_v; without a standard error yet, treat the point as noisy.
+    let sigma: Vec<f64> = acc
+        .iter()
+        .map(|a| {
+            a.std_error().map_or(f64::NAN, |se| {
+                se.length() as f64 * (a.replicates as f64).sqrt()
+            })
+        })
+        .collect();
+    let total: f64 = sigma.iter().filter(|s| s.is_finite()).sum();
+    let mut more = 0u64;
+    for ((a, b), s) in acc.iter().zip(budget.iter_mut()).zip(&sigma) {
+        let need = if s.is_finite() {
+            (s * total / allowed * 1.2).ceil()
+        } else {
+            f64::INFINITY
+        };
+        let next = (need.min(u32::MAX as f64) as u32)
+            .clamp(a.replicates, a.replicates.saturating_mul(8))
+            .min(max_replicates)
+            .max(a.replicates);
+        more += (next - a.replicates) as u64;
+        *b = next;
+    }
+    more
 }
 
 /// The shading points of every vertex of a frame, seen from `eye`.
@@ -202,12 +269,14 @@ pub fn pixel_points(
         .collect()
 }
 
-/// A reference (or a low-sample ray-traced estimate) per vertex.
+/// A reference per vertex, with standard errors.
 #[derive(Clone, Debug)]
 pub struct VertexReference {
     pub radiance: VertexRadiance,
-    pub iterations: Vec<u32>,
+    /// Replicates per vertex.
+    pub replicates: Vec<u32>,
     pub rays: u64,
+    /// The relative L2 noise, `sqrt(Σ|SE|² / Σ|L|²)`.
     pub noise: f32,
     pub seconds: f64,
 }
@@ -245,21 +314,27 @@ pub fn vertex_reference(
     settings: &ReferenceSettings,
     progress: &ProgressBar,
 ) -> Result<VertexReference> {
+    if settings.min_replicates < 2 {
+        return Err(Error::InvalidScene(format!(
+            "a reference needs at least 2 replicates for its standard error, got {}",
+            settings.min_replicates
+        )));
+    }
     let start = Instant::now();
     let setup = Setup::new(frame, environment)?;
     let points = vertex_points(scene, frame, eye);
     let est = estimate(&points, &setup.estimator(environment), settings, progress);
     Ok(VertexReference {
         radiance: split_per_object(frame, &est),
-        noise: est.relative_noise(),
-        iterations: est.iterations,
+        noise: est.relative_noise().unwrap_or(f32::INFINITY),
+        replicates: est.replicates,
         rays: est.rays,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
 
 /// Estimates outgoing radiance at the surface seen through every pixel; also
-/// returns the estimate's relative noise.
+/// returns the estimate's relative noise (`None` with one replicate).
 pub fn pixel_reference(
     scene: &Scene,
     frame: &FrameGeometry,
@@ -267,7 +342,7 @@ pub fn pixel_reference(
     camera: &Camera,
     settings: &ReferenceSettings,
     progress: &ProgressBar,
-) -> Result<(Image, f32)> {
+) -> Result<(Image, Option<f32>)> {
     let setup = Setup::new(frame, environment)?;
     let pixels = pixel_points(scene, frame, &setup.bvh, camera);
     Ok(image_from_points(
@@ -287,7 +362,7 @@ pub fn image_from_points(
     estimator: &Estimator,
     settings: &ReferenceSettings,
     progress: &ProgressBar,
-) -> (Image, f32) {
+) -> (Image, Option<f32>) {
     let covered: Vec<bool> = pixels.iter().map(Option::is_some).collect();
     let points: Vec<ShadingPoint> = pixels.iter().flatten().copied().collect();
     let est = estimate(&points, estimator, settings, progress);
@@ -296,7 +371,10 @@ pub fn image_from_points(
         height: camera.height,
         pixels: vec![Vec3::ZERO; covered.len()],
         covered,
-        std_error: Some(vec![Vec3::ZERO; pixels.len()]),
+        std_error: est
+            .std_error
+            .as_ref()
+            .map(|_| vec![Vec3::ZERO; pixels.len()]),
     };
     let slots = image
         .covered
@@ -304,29 +382,36 @@ pub fn image_from_points(
         .enumerate()
         .filter(|(_, c)| **c)
         .map(|(i, _)| i);
-    let errors = image.std_error.as_mut().expect("set above");
-    for ((slot, mean), se) in slots.zip(&est.mean).zip(&est.std_error) {
-        image.pixels[slot] = *mean;
-        errors[slot] = *se;
+    for (k, slot) in slots.enumerate() {
+        image.pixels[slot] = est.mean[k];
+        if let (Some(errors), Some(se)) = (image.std_error.as_mut(), est.std_error.as_ref()) {
+            errors[slot] = se[k];
+        }
     }
     (image, est.relative_noise())
 }
 
 /// Splits flat per-point estimates into per-object vectors.
 pub fn split_per_object(frame: &FrameGeometry, est: &Estimates) -> VertexRadiance {
-    let mut radiance = Vec::with_capacity(frame.objects.len());
-    let mut std_error = Vec::with_capacity(frame.objects.len());
-    let mut start = 0;
-    for object in &frame.objects {
-        let end = start + object.vertex_count();
-        radiance.push(est.mean[start..end].to_vec());
-        std_error.push(est.std_error[start..end].to_vec());
-        start = end;
-    }
     VertexRadiance {
-        radiance,
-        std_error: Some(std_error),
+        radiance: split(frame, &est.mean),
+        std_error: est.std_error.as_ref().map(|se| split(frame, se)),
     }
+}
+
+/// Splits a flat per-vertex list into per-object vectors.
+pub fn split<T: Clone>(frame: &FrameGeometry, flat: &[T]) -> Vec<Vec<T>> {
+    let mut start = 0;
+    frame
+        .objects
+        .iter()
+        .map(|object| {
+            let end = start + object.vertex_count();
+            let part = flat[start..end].to_vec();
+            start = end;
+            part
+        })
+        .collect()
 }
 
 /// The vertex reference of every frame of `scene` under `environment`, seen

@@ -92,7 +92,7 @@ pub fn builtin(name: &str) -> Result<Scene> {
     let assets = assets_dir().join("meshes");
     match name {
         "furnace" => {
-            let sphere = shapes::uv_sphere("sphere", Vec3::ZERO, 1.0, 16, 32)?;
+            let sphere = shapes::uv_sphere("sphere", Vec3::ZERO, 1.0, 32, 64)?;
             still(name, vec![sphere])
         }
         "wall" => {
