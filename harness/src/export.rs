@@ -60,3 +60,71 @@ pub fn write_vertices(path: &Path, frame: &FrameGeometry, values: &VertexRadianc
     };
     write_atomic(path, &bytes)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenes;
+
+    fn sample() -> (FrameGeometry, VertexRadiance) {
+        let scene = scenes::builtin("wall").unwrap();
+        let frame = scene.frame_geometry(0).unwrap();
+        let radiance: Vec<Vec<Vec3>> = frame
+            .objects
+            .iter()
+            .map(|o| {
+                (0..o.vertex_count())
+                    .map(|v| Vec3::splat(v as f32))
+                    .collect()
+            })
+            .collect();
+        let std_error = Some(
+            radiance
+                .iter()
+                .map(|o| vec![Vec3::splat(0.5); o.len()])
+                .collect(),
+        );
+        (
+            frame,
+            VertexRadiance {
+                radiance,
+                std_error,
+            },
+        )
+    }
+
+    #[test]
+    fn csv_has_a_header_and_one_row_per_vertex() {
+        let (frame, values) = sample();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.csv");
+        write_vertices(&path, &frame, &values).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let vertices: usize = frame.objects.iter().map(|o| o.vertex_count()).sum();
+        assert_eq!(text.lines().count(), vertices + 1);
+        assert!(text.starts_with("object,vertex,px"));
+        let row: Vec<&str> = text.lines().nth(3).unwrap().split(',').collect();
+        assert_eq!(row.len(), 14);
+        assert_eq!((row[0], row[1], row[8], row[11]), ("0", "2", "2", "0.5"));
+    }
+
+    #[test]
+    fn json_round_trips_through_serde() {
+        let (frame, values) = sample();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.json");
+        write_vertices(&path, &frame, &values).unwrap();
+        let rows: Vec<serde_json::Value> =
+            serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(rows[5]["radiance"][0], 5.0);
+        assert_eq!(rows[5]["std_error"][2], 0.5);
+        assert_eq!(rows[5]["normal"][1], 1.0);
+    }
+
+    #[test]
+    fn unknown_extension_is_an_error_naming_the_file() {
+        let (frame, values) = sample();
+        let err = write_vertices(Path::new("results.txt"), &frame, &values).unwrap_err();
+        assert!(err.to_string().contains("results.txt"), "{err}");
+    }
+}

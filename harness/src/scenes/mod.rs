@@ -110,10 +110,11 @@ pub fn builtin(name: &str) -> Result<Scene> {
     }
 }
 
-/// Loads an environment by name (`uniform` or a shipped map) or from a path.
+/// Loads an environment by name (`uniform` or a shipped map) or from a path;
+/// the result is named by its short name (the file stem for a path).
 pub fn environment(name_or_path: &str) -> Result<Environment> {
     if name_or_path == "uniform" {
-        return Ok(Environment::uniform(Vec3::ONE));
+        return Ok(Environment::uniform(Vec3::ONE).renamed("uniform"));
     }
     let path = if ENVIRONMENTS.contains(&name_or_path) {
         assets_dir()
@@ -122,7 +123,11 @@ pub fn environment(name_or_path: &str) -> Result<Environment> {
     } else {
         PathBuf::from(name_or_path)
     };
-    Environment::load_exr(&path)
+    let short = path.file_stem().map_or_else(
+        || name_or_path.to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    Ok(Environment::load_exr(&path)?.renamed(short))
 }
 
 /// The floor and wall of the analytic scene: a 4×4 m floor at y = 0 and a

@@ -110,6 +110,13 @@ impl Environment {
         &self.name
     }
 
+    /// The same map under another name (loaded maps are named by their path,
+    /// which errors need; reports want a short name).
+    pub fn renamed(mut self, name: impl Into<String>) -> Environment {
+        self.name = name.into();
+        self
+    }
+
     pub fn width(&self) -> usize {
         self.width
     }
