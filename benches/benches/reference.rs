@@ -16,7 +16,7 @@ fn shadow_rays(c: &mut Criterion) {
     let env = scenes::environment("forest").expect("the forest environment loads");
     let frame = scene.frame_geometry(0).expect("frame 0");
     let setup = Setup::new(&frame, &env).expect("BVH and sampler");
-    let estimator = setup.estimator(&env);
+    let estimator = setup.estimator();
     let points = reference::vertex_points(&scene, &frame, scene.camera().eye);
     let settings = ReferenceSettings::replicated(4, 2, 1);
     let bar = ProgressBar::hidden();

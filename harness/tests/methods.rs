@@ -87,7 +87,7 @@ fn glossy_furnace_at_normal_view_reflects_diffuse_plus_specular() {
     };
     let est = reference::estimate(
         &[point],
-        &setup.estimator(&env),
+        &setup.estimator(),
         &ReferenceSettings::replicated(256, 16, 3),
         &ProgressBar::hidden(),
     );

@@ -168,7 +168,7 @@ fn centre_of_a_closed_box_is_black() {
     };
     let est = reference::estimate(
         &[point],
-        &setup.estimator(&env),
+        &setup.estimator(),
         &ReferenceSettings::fixed(2048, 1),
         &ProgressBar::hidden(),
     );

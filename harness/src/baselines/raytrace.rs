@@ -19,7 +19,7 @@ pub struct RayTrace {
     settings: ReferenceSettings,
     scene: Option<Scene>,
     frame: Option<(FrameGeometry, SceneBvh)>,
-    lighting: Option<(Environment, EnvironmentSampler)>,
+    sampler: Option<EnvironmentSampler>,
 }
 
 impl RayTrace {
@@ -29,7 +29,7 @@ impl RayTrace {
             settings: ReferenceSettings::fixed(iterations, seed),
             scene: None,
             frame: None,
-            lighting: None,
+            sampler: None,
         }
     }
 
@@ -49,8 +49,8 @@ impl RayTrace {
             .frame
             .as_ref()
             .ok_or_else(|| self.stage_error("shade before update"))?;
-        let (environment, sampler) = self
-            .lighting
+        let sampler = self
+            .sampler
             .as_ref()
             .ok_or_else(|| self.stage_error("shade before relight"))?;
         Ok((
@@ -58,7 +58,6 @@ impl RayTrace {
             frame,
             Estimator {
                 bvh,
-                environment,
                 sampler,
                 offset: bvh.ray_offset(),
             },
@@ -90,7 +89,7 @@ impl ShadowMethod for RayTrace {
 
     /// Builds the environment's sampling tables.
     fn relight(&mut self, environment: &Environment) -> Result<()> {
-        self.lighting = Some((environment.clone(), EnvironmentSampler::new(environment)));
+        self.sampler = Some(EnvironmentSampler::new(environment));
         Ok(())
     }
 

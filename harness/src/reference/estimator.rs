@@ -22,7 +22,7 @@
 //! Monte Carlo on smooth lighting.
 //!
 //! The environment is treated as piecewise constant per texel
-//! ([`Environment::texel_radiance`]), which is exactly the function the sampler
+//! ([`shadow_core::Environment::texel_radiance`]), which is exactly the function the sampler
 //! draws from: the reference integrates the map as stored, with no filtering.
 
 use std::f32::consts::FRAC_1_PI;
@@ -30,7 +30,7 @@ use std::f32::consts::FRAC_1_PI;
 use glam::{Vec2, Vec3};
 use rand_core::Rng;
 use rand_pcg::Pcg32;
-use shadow_core::{Brdf, Environment, bvh::SceneBvh, environment::EnvironmentSampler};
+use shadow_core::{Brdf, bvh::SceneBvh, environment::EnvironmentSampler};
 
 /// A point to shade: where, which way the surface faces, toward whom, with what.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,7 +88,6 @@ impl Accumulator {
 /// What one pass of the estimator reads: the scene's rays and the lighting.
 pub struct Estimator<'a> {
     pub bvh: &'a SceneBvh,
-    pub environment: &'a Environment,
     pub sampler: &'a EnvironmentSampler,
     /// Shadow rays start at `x + offset·n` (see [`SceneBvh::ray_offset`]).
     pub offset: f32,
@@ -112,13 +111,13 @@ impl Estimator<'_> {
             let w = t * local.x + b * local.y + n * local.z;
             let cos = n.dot(w);
             if cos > 0.0 {
-                let le = self.environment.texel_radiance(w);
+                let (pdf_env, le) = self.sampler.pdf_and_radiance(w);
                 if le != Vec3::ZERO {
                     let f = le * point.material.eval(n, w, point.view) * cos;
                     if f != Vec3::ZERO {
                         rays += 1;
                         if self.bvh.unoccluded(origin, w, f32::INFINITY) {
-                            sum += f / (cos * FRAC_1_PI + self.sampler.pdf(w));
+                            sum += f / (cos * FRAC_1_PI + pdf_env);
                         }
                     }
                 }

@@ -295,10 +295,9 @@ impl Setup {
         })
     }
 
-    pub fn estimator<'a>(&'a self, environment: &'a Environment) -> Estimator<'a> {
+    pub fn estimator(&self) -> Estimator<'_> {
         Estimator {
             bvh: &self.bvh,
-            environment,
             sampler: &self.sampler,
             offset: self.bvh.ray_offset(),
         }
@@ -323,7 +322,7 @@ pub fn vertex_reference(
     let start = Instant::now();
     let setup = Setup::new(frame, environment)?;
     let points = vertex_points(scene, frame, eye);
-    let est = estimate(&points, &setup.estimator(environment), settings, progress);
+    let est = estimate(&points, &setup.estimator(), settings, progress);
     Ok(VertexReference {
         radiance: split_per_object(frame, &est),
         noise: est.relative_noise().unwrap_or(f32::INFINITY),
@@ -348,7 +347,7 @@ pub fn pixel_reference(
     Ok(image_from_points(
         camera,
         &pixels,
-        &setup.estimator(environment),
+        &setup.estimator(),
         settings,
         progress,
     ))

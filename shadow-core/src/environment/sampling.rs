@@ -194,6 +194,15 @@ impl EnvironmentSampler {
         self.density(row, col)
     }
 
+    /// The density of `dir` together with the radiance of its texel: one
+    /// direction-to-texel mapping for both, as an estimator that evaluates the
+    /// map and weighs a sample from another strategy needs.
+    #[inline]
+    pub fn pdf_and_radiance(&self, dir: Vec3) -> (f32, Vec3) {
+        let (row, col) = self.env.texel_of(dir);
+        (self.density(row, col), self.env.texel(row, col))
+    }
+
     /// P(texel) / Ω(texel), from the CDF steps that `sample` walks.
     #[inline]
     fn density(&self, row: usize, col: usize) -> f32 {
