@@ -1,10 +1,7 @@
 //! The `harness` command: list scenes, compute references, run methods, and
 //! write the comparison report.
 
-use std::{
-    path::{Path, PathBuf},
-    time::Instant,
-};
+use std::{path::PathBuf, time::Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
@@ -308,9 +305,8 @@ fn main() -> Result<()> {
             }
             report.write(&dir)?;
             println!(
-                "wrote {} and {}",
-                dir.join("report.md").display(),
-                Path::new(&dir).join("report.json").display()
+                "wrote report.md, report.json and speed-vs-error.png in {}",
+                dir.display()
             );
         }
     }

@@ -8,6 +8,9 @@ use shadow_core::{Error, Result};
 
 use crate::{io::write_atomic, run::RunResult};
 
+/// The chart's file name beside the report.
+const CHART: &str = "speed-vs-error.png";
+
 /// Where and how the numbers were measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct MachineInfo {
@@ -67,11 +70,13 @@ pub struct Report {
 }
 
 impl Report {
-    /// Writes `report.json` and `report.md` into `dir`, atomically.
+    /// Writes `report.json`, `report.md` and the speed-versus-error chart
+    /// `speed-vs-error.png` into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
         let json = serde_json::to_vec_pretty(self)
             .map_err(|e| Error::format(dir.join("report.json"), e.to_string()))?;
         write_atomic(&dir.join("report.json"), &json)?;
+        crate::chart::speed_vs_error(&self.runs, &dir.join(CHART))?;
         write_atomic(&dir.join("report.md"), self.markdown().as_bytes())
     }
 
@@ -121,6 +126,7 @@ impl Report {
             );
         }
         let _ = writeln!(s, "\n## Methods\n");
+        let _ = writeln!(s, "![time per frame against error]({CHART})\n");
         let _ = writeln!(
             s,
             "| scene | method | error | p99 | max | prepare ms | update ms | relight ms | shade ms | frame ms |"
