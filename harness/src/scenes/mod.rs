@@ -57,7 +57,7 @@ pub const SCENES: &[SceneSpec] = &[
     },
     SceneSpec {
         name: "human",
-        shows: "a skinned, animated human (the size of Kautz et al.'s 'Fight'), 6 frames",
+        shows: "a skinned, animated human (the size of Kautz et al.'s 'Fight'), 6 frames over its jump",
         environment: "sunset",
     },
     SceneSpec {
@@ -169,9 +169,16 @@ fn on_floor(name: &str, path: &Path, frames: usize) -> Result<Scene> {
     framed(name, objects, frames)
 }
 
+/// The asset's objects and `frames` frames spread evenly over its first
+/// animation clip (both ends included); one frame if it is not animated.
 fn load_parts(path: &Path, frames: usize) -> Result<(Vec<Object>, Vec<Frame>)> {
     let asset = GltfAsset::load(path)?;
-    asset.to_scene_parts(white(), 30.0, frames)
+    let fps = if asset.is_animated() && frames > 1 && asset.duration() > 0.0 {
+        (frames - 1) as f32 / asset.duration()
+    } else {
+        30.0
+    };
+    asset.to_scene_parts(white(), fps, frames)
 }
 
 /// Static meshes at the identity pose.
@@ -218,4 +225,39 @@ fn first_frame_bounds(objects: &[Object], frames: &[Frame]) -> Aabb {
             Pose::Deformed { positions, .. } => Aabb::from_points(positions.iter().copied()),
         })
         .fold(Aabb::EMPTY, Aabb::union)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_scene_builds_with_its_environment() {
+        for spec in SCENES {
+            let scene = builtin(spec.name).unwrap();
+            assert!(scene.vertex_count() > 0, "{}", spec.name);
+            assert!(ENVIRONMENTS.contains(&spec.environment));
+        }
+        assert!(
+            builtin("nonesuch")
+                .unwrap_err()
+                .to_string()
+                .contains("furnace")
+        );
+    }
+
+    #[test]
+    fn the_human_frames_span_the_whole_clip() {
+        let scene = builtin("human").unwrap();
+        let times: Vec<f32> = scene.frames().iter().map(|f| f.time).collect();
+        assert_eq!(times.len(), 6);
+        assert!(times[5] > 3.0, "{times:?}");
+    }
+
+    #[test]
+    fn environments_load_by_short_name() {
+        assert_eq!(environment("uniform").unwrap().name(), "uniform");
+        assert_eq!(environment("night").unwrap().name(), "night");
+        assert!(environment("/no/such/map.exr").is_err());
+    }
 }
