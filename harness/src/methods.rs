@@ -11,19 +11,34 @@ pub const METHODS: &[(&str, &str)] = &[
         "SH lighting (order 9) with no visibility: the upper bound",
     ),
     (
+        "hemi-raster",
+        "Kautz et al. 2004: CPU hemispherical rasterization to SH transfer (32×32 masks, order 5)",
+    ),
+    (
         "raytrace:N",
         "Monte-Carlo ray tracing, N MIS iterations per vertex (e.g. raytrace:16)",
     ),
 ];
 
 /// The methods of the standard report.
-pub const REPORT_METHODS: &[&str] = &["unshadowed", "raytrace:4", "raytrace:16", "raytrace:64"];
+pub const REPORT_METHODS: &[&str] = &[
+    "unshadowed",
+    "hemi-raster",
+    "raytrace:4",
+    "raytrace:16",
+    "raytrace:64",
+];
 
 /// Builds a method from its name.
 pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
     if name == "unshadowed" {
         let order = ShOrder::new(9).expect("9 is a valid SH order");
         return Ok(Box::new(Unshadowed::new(order)));
+    }
+    if name == "hemi-raster" {
+        return Ok(Box::new(hemi_raster::HemiRaster::new(
+            hemi_raster::Config::default(),
+        )));
     }
     if let Some(n) = name.strip_prefix("raytrace:") {
         let iterations: u32 = n.parse().ok().filter(|&i| i >= 2).ok_or_else(|| {

@@ -99,7 +99,7 @@ impl Report {
             "Error is the relative L2 error over all vertices against the Monte-Carlo reference, \
              averaged over frames; p99 and max are per-vertex relative errors (floor 1% of the RMS \
              radiance); \"ref noise\" is the reference's own relative L2 noise, below which errors \
-             cannot be told apart. Times are medians of repeated runs, wall clock.\n"
+             cannot be told apart. Times are medians of repeated runs, wall clock (a frame is not repeated once its stages took 2 s).\n"
         );
         let _ = writeln!(s, "## References\n");
         let _ = writeln!(

@@ -11,6 +11,9 @@ use crate::{
     score::{ErrorStats, compare},
 };
 
+/// Seconds of stage time per frame after which repeats stop.
+pub const REPEAT_BUDGET: f64 = 2.0;
+
 /// Median wall-clock seconds of each stage over the repeats.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimes {
@@ -61,8 +64,9 @@ impl RunResult {
 }
 
 /// Runs `method` on every frame of `scene` under `environment`, each stage
-/// `repeats` times (median reported), and scores frame `i` against
-/// `references[i]`.
+/// up to `repeats` times (median reported), and scores frame `i` against
+/// `references[i]`. A frame whose stages have taken [`REPEAT_BUDGET`] seconds
+/// is not repeated further: one slow run already measures well.
 pub fn run(
     method: &mut dyn ShadowMethod,
     scene: &Scene,
@@ -79,7 +83,11 @@ pub fn run(
         let geometry = scene.frame_geometry(index)?;
         let (mut update, mut relight, mut shade) = (Vec::new(), Vec::new(), Vec::new());
         let mut shading = None;
+        let started = Instant::now();
         for _ in 0..repeats {
+            if !update.is_empty() && started.elapsed().as_secs_f64() > REPEAT_BUDGET {
+                break;
+            }
             update.push(timed(|| method.update(&geometry))?);
             relight.push(timed(|| method.relight(environment))?);
             let start = Instant::now();

@@ -1,8 +1,22 @@
-//! # hemi-raster
-//!
-//! Kautz, Lehtinen and Aila 2004, "Hemispherical rasterization for
-//! self-shadowing of dynamic objects": per-vertex visibility masks rasterized on
-//! the CPU, projected to spherical-harmonic transfer.
-//!
-//! Not implemented yet: this crate exists so the workspace has its final shape.
-//! It exports nothing until the method lands, so that nothing here pretends to work.
+#![doc = include_str!("../README.md")]
+
+mod config;
+mod disk;
+mod lut;
+mod mask;
+mod method;
+mod rasterize;
+mod transfer;
+
+#[cfg(test)]
+mod properties;
+#[cfg(test)]
+mod test_util;
+
+pub use config::{BackfaceCulling, Config, MaskResolution};
+pub use disk::{BLOCK, DiskGrid};
+pub use lut::PlaneLut;
+pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
+pub use method::HemiRaster;
+pub use rasterize::{Rasterizer, TangentFrame};
+pub use transfer::{Integration, direct_irradiance, pixel_angle, sh_transfer};

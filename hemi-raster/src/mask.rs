@@ -1,0 +1,258 @@
+//! Bit-packed visibility masks (Kautz et al. 2004, §3.1): one machine word per
+//! row of the square grid laid over the unit disk, so that rasterizing a
+//! triangle is three row-wise ANDs and an OR (§3.1.1), with no per-pixel work.
+
+use std::fmt::Debug;
+use std::ops::{BitAnd, BitOr, BitXor, Not, Shr};
+
+/// A row of a mask: an unsigned word whose bit `c` is column `c`. Its width is
+/// the mask's resolution, so a mask is `RESOLUTION` words.
+pub trait MaskRow:
+    Copy
+    + Eq
+    + Debug
+    + Send
+    + Sync
+    + 'static
+    + BitAnd<Output = Self>
+    + BitOr<Output = Self>
+    + BitXor<Output = Self>
+    + Not<Output = Self>
+    + Shr<u32, Output = Self>
+{
+    /// Pixels per row and rows per mask.
+    const RESOLUTION: usize;
+    /// No bit set.
+    const ZERO: Self;
+    /// The rows of one mask: `[Self; RESOLUTION]`.
+    type Rows: Copy + Eq + Debug + Send + Sync + AsRef<[Self]> + AsMut<[Self]>;
+    /// Every row zero.
+    const EMPTY_ROWS: Self::Rows;
+
+    /// The word with only bit `col` set.
+    fn bit(col: usize) -> Self;
+    /// Number of set bits.
+    fn ones(self) -> u32;
+    /// Index of the lowest set bit (the word must not be zero).
+    fn lowest(self) -> u32;
+    /// The word with its lowest set bit cleared.
+    fn clear_lowest(self) -> Self;
+    /// The low four bits, as a number: one row of a 4×4 block.
+    fn low_nibble(self) -> u32;
+}
+
+macro_rules! mask_row {
+    ($t:ty) => {
+        impl MaskRow for $t {
+            const RESOLUTION: usize = <$t>::BITS as usize;
+            const ZERO: Self = 0;
+            type Rows = [$t; <$t>::BITS as usize];
+            const EMPTY_ROWS: Self::Rows = [0; <$t>::BITS as usize];
+
+            fn bit(col: usize) -> Self {
+                1 << col
+            }
+            fn ones(self) -> u32 {
+                self.count_ones()
+            }
+            fn lowest(self) -> u32 {
+                self.trailing_zeros()
+            }
+            fn clear_lowest(self) -> Self {
+                self & self.wrapping_sub(1)
+            }
+            fn low_nibble(self) -> u32 {
+                (self & 0xF) as u32
+            }
+        }
+    };
+}
+
+mask_row!(u16);
+mask_row!(u32);
+mask_row!(u64);
+
+/// A binary image of `W::RESOLUTION`² pixels over the square [−1, 1]² that
+/// holds the unit disk: row `r`, column `c` is the pixel centred on
+/// x = −1 + (2c+1)/R, y = −1 + (2r+1)/R (see [`crate::DiskGrid`]). A set bit
+/// means "blocked" in a visibility mask, "above the plane" in a LUT entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Mask<W: MaskRow> {
+    rows: W::Rows,
+}
+
+/// The paper's 32×32 mask.
+pub type Mask32 = Mask<u32>;
+/// A coarser 16×16 mask.
+pub type Mask16 = Mask<u16>;
+/// A finer 64×64 mask.
+pub type Mask64 = Mask<u64>;
+
+impl<W: MaskRow> Default for Mask<W> {
+    fn default() -> Self {
+        Mask::EMPTY
+    }
+}
+
+impl<W: MaskRow> Mask<W> {
+    /// No pixel set.
+    pub const EMPTY: Mask<W> = Mask {
+        rows: W::EMPTY_ROWS,
+    };
+
+    /// Pixels per side.
+    pub const RESOLUTION: usize = W::RESOLUTION;
+
+    /// The rows, row 0 first.
+    pub fn rows(&self) -> &[W] {
+        self.rows.as_ref()
+    }
+
+    /// Whether pixel (`row`, `col`) is set.
+    ///
+    /// # Panics
+    /// If `row` or `col` is not below the resolution.
+    pub fn get(&self, row: usize, col: usize) -> bool {
+        assert!(col < W::RESOLUTION, "column {col} out of range");
+        self.rows.as_ref()[row] & W::bit(col) != W::ZERO
+    }
+
+    /// Sets pixel (`row`, `col`).
+    ///
+    /// # Panics
+    /// If `row` or `col` is not below the resolution.
+    pub fn set(&mut self, row: usize, col: usize) {
+        assert!(col < W::RESOLUTION, "column {col} out of range");
+        let r = &mut self.rows.as_mut()[row];
+        *r = *r | W::bit(col);
+    }
+
+    /// Number of set pixels.
+    pub fn count(&self) -> usize {
+        self.rows().iter().map(|r| r.ones() as usize).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rows().iter().all(|&r| r == W::ZERO)
+    }
+
+    /// Pixels set in both.
+    pub fn and(&self, other: &Mask<W>) -> Mask<W> {
+        self.zip(other, |a, b| a & b)
+    }
+
+    /// Pixels set in either: occluder fusion (§3.1.1).
+    pub fn or(&self, other: &Mask<W>) -> Mask<W> {
+        self.zip(other, |a, b| a | b)
+    }
+
+    /// Pixels set in `self` but not in `other`.
+    pub fn and_not(&self, other: &Mask<W>) -> Mask<W> {
+        self.zip(other, |a, b| a & !b)
+    }
+
+    /// `self |= (a₀ ^ f₀) & (a₁ ^ f₁) & (a₂ ^ f₂)`: one blocker triangle,
+    /// the AND of its three edge masks (each possibly complemented by XOR
+    /// with the disk, see [`crate::PlaneLut::entry`]), fused into the
+    /// visibility mask. A plain loop over fixed-size rows, which the compiler
+    /// vectorizes.
+    pub fn or_and3_xor(&mut self, a: [&Mask<W>; 3], f: [&Mask<W>; 3]) {
+        for (r, d) in self.rows.as_mut().iter_mut().enumerate() {
+            let e = |k: usize| a[k].rows.as_ref()[r] ^ f[k].rows.as_ref()[r];
+            *d = *d | (e(0) & e(1) & e(2));
+        }
+    }
+
+    /// True when every pixel set in `other` is set in `self`.
+    pub fn contains(&self, other: &Mask<W>) -> bool {
+        self.rows()
+            .iter()
+            .zip(other.rows())
+            .all(|(&a, &b)| b & !a == W::ZERO)
+    }
+
+    /// The set pixels as (row, col), row by row.
+    pub fn pixels(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.rows().iter().enumerate().flat_map(|(r, &row)| {
+            let mut bits = row;
+            std::iter::from_fn(move || {
+                (bits != W::ZERO).then(|| {
+                    let c = bits.lowest() as usize;
+                    bits = bits.clear_lowest();
+                    (r, c)
+                })
+            })
+        })
+    }
+
+    /// Set pixels in the 4×4 block (`block_row`, `block_col`): the grey level
+    /// of §3.2's downsampling, times 16.
+    pub fn block_count(&self, block_row: usize, block_col: usize) -> u32 {
+        self.rows()[4 * block_row..4 * block_row + 4]
+            .iter()
+            .map(|&r| (r >> (4 * block_col as u32)).low_nibble().count_ones())
+            .sum()
+    }
+
+    fn zip(&self, other: &Mask<W>, f: impl Fn(W, W) -> W) -> Mask<W> {
+        let mut out = *self;
+        for (d, &o) in out.rows.as_mut().iter_mut().zip(other.rows()) {
+            *d = f(*d, o);
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn set_get_count_and_pixels_agree() {
+        let mut m = Mask32::EMPTY;
+        for (r, c) in [(0, 0), (3, 31), (31, 5), (17, 17)] {
+            m.set(r, c);
+        }
+        assert_eq!(m.count(), 4);
+        assert!(m.get(3, 31) && !m.get(3, 30));
+        let px: Vec<_> = m.pixels().collect();
+        assert_eq!(px, vec![(0, 0), (3, 31), (17, 17), (31, 5)]);
+        let mut big = Mask64::EMPTY;
+        big.set(63, 63);
+        assert_eq!(big.pixels().collect::<Vec<_>>(), vec![(63, 63)]);
+    }
+
+    #[test]
+    fn boolean_operations_and_blocks() {
+        let mut a = Mask16::EMPTY;
+        let mut b = Mask16::EMPTY;
+        a.set(1, 1);
+        a.set(5, 6);
+        b.set(5, 6);
+        b.set(9, 9);
+        assert_eq!(a.and(&b).count(), 1);
+        assert_eq!(a.or(&b).count(), 3);
+        assert_eq!(a.and_not(&b).pixels().collect::<Vec<_>>(), vec![(1, 1)]);
+        assert!(a.or(&b).contains(&a) && !a.contains(&b));
+        let mut fused = Mask16::EMPTY;
+        let none = Mask16::EMPTY;
+        fused.or_and3_xor([&a.or(&b), &a, &b], [&none, &none, &none]);
+        assert_eq!(fused, a.and(&b));
+        let mut full = Mask16::EMPTY;
+        for r in 0..16 {
+            for c in 0..16 {
+                full.set(r, c);
+            }
+        }
+        let mut flipped = Mask16::EMPTY;
+        flipped.or_and3_xor([&a, &b, &full], [&full, &none, &full]);
+        // (!a) & b & !full = nothing; (!a) & b & full = b without a.
+        assert!(flipped.is_empty());
+        flipped.or_and3_xor([&a, &b, &full], [&full, &none, &none]);
+        assert_eq!(flipped, b.and_not(&a));
+        assert_eq!(a.block_count(0, 0), 1);
+        assert_eq!(a.block_count(1, 1), 1);
+        assert_eq!(b.block_count(2, 2), 1);
+        assert_eq!(b.block_count(0, 0), 0);
+    }
+}

@@ -1,0 +1,109 @@
+//! Property tests of the rasterizer and the transfer.
+
+use std::sync::OnceLock;
+
+use glam::{Quat, Vec3};
+use proptest::prelude::*;
+use shadow_core::sh::{ShOrder, ShRgb, ShRotation, Zonal, project_fn_rgb};
+
+use crate::mask::Mask;
+use crate::rasterize::{Rasterizer, TangentFrame};
+use crate::transfer::sh_transfer;
+
+fn raster() -> &'static Rasterizer<u32> {
+    static RASTER: OnceLock<Rasterizer<u32>> = OnceLock::new();
+    RASTER.get_or_init(|| Rasterizer::new(128).unwrap())
+}
+
+fn point() -> impl Strategy<Value = Vec3> {
+    (-1.5f32..1.5, -1.5f32..1.5, -0.5f32..1.5).prop_map(|(x, y, z)| Vec3::new(x, y, z))
+}
+
+fn triangle() -> impl Strategy<Value = [Vec3; 3]> {
+    [point(), point(), point()]
+}
+
+fn rotation() -> impl Strategy<Value = Quat> {
+    (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0)
+        .prop_filter("non-zero", |(a, b, c, d)| {
+            a * a + b * b + c * c + d * d > 0.1
+        })
+        .prop_map(|(a, b, c, d)| Quat::from_xyzw(a, b, c, d).normalize())
+}
+
+/// Blockers over a receiver at the origin with normal +y (world space).
+fn blockers() -> Vec<[Vec3; 3]> {
+    vec![
+        [
+            Vec3::new(-0.5, 0.6, -0.2),
+            Vec3::new(0.4, 0.5, -0.3),
+            Vec3::new(0.1, 0.7, 0.5),
+        ],
+        [
+            Vec3::new(0.6, 0.2, 0.1),
+            Vec3::new(1.2, 0.9, -0.4),
+            Vec3::new(0.9, 0.3, 0.8),
+        ],
+        [
+            Vec3::new(-1.0, 0.1, -1.0),
+            Vec3::new(-0.8, 0.4, 0.9),
+            Vec3::new(-0.3, 0.9, 0.0),
+        ],
+    ]
+}
+
+/// Irradiance at a receiver, through mask and SH transfer (order 5).
+fn irradiance(normal: Vec3, tris: &[[Vec3; 3]], light: &ShRgb, blocks: bool) -> Vec3 {
+    let raster = raster();
+    let frame = TangentFrame::new(Vec3::ZERO, normal);
+    let mask = raster.mask(&frame, tris, false);
+    let lambert = Zonal::lambert(light.order());
+    let mut t = vec![0.0; light.order().coeff_count()];
+    sh_transfer(raster.grid(), &mask, &frame, &lambert, blocks, &mut t);
+    light.dot(&t)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Occluder fusion only adds: a mask with one more blocker is a bitwise
+    /// superset of the mask without it.
+    #[test]
+    fn adding_a_blocker_never_shrinks_the_mask(
+        tris in prop::collection::vec(triangle(), 1..6),
+        extra in triangle(),
+        cull in any::<bool>(),
+    ) {
+        let raster = raster();
+        let mut mask = Mask::EMPTY;
+        for t in &tris {
+            raster.draw(*t, cull, &mut mask);
+        }
+        let before = mask;
+        raster.draw(extra, cull, &mut mask);
+        prop_assert!(mask.contains(&before));
+        prop_assert!(raster.grid().disk().contains(&mask));
+    }
+
+    /// Turning receiver, blockers and lighting together leaves the exit
+    /// radiance unchanged up to the discretization: the tangent frame's twist
+    /// about the normal changes, so the pixels sample other directions and the
+    /// planes fall in other table cells.
+    #[test]
+    fn rotating_the_whole_setup_keeps_the_radiance(q in rotation(), blocks in any::<bool>()) {
+        let order = ShOrder::new(5).unwrap();
+        let light = project_fn_rgb(order, 32, |d| {
+            Vec3::new(1.0 + d.y.max(0.0) * 2.0, 0.6 + 0.4 * d.x, 0.8 + 0.5 * d.z * d.z)
+        });
+        let e0 = irradiance(Vec3::Y, &blockers(), &light, blocks);
+        let turned: Vec<[Vec3; 3]> = blockers().iter().map(|t| t.map(|p| q * p)).collect();
+        let rotated = light.rotated(&ShRotation::from_quat(order, q).unwrap());
+        let e1 = irradiance(q * Vec3::Y, &turned, &rotated, blocks);
+        let rel = (e1 - e0).length() / e0.length();
+        // The blockers hide 37% of the cosine-weighted hemisphere, some of
+        // it near the horizon where pixels are coarse; over 40 fixed
+        // rotations the spread was 1.7% (2.0% under uniform light, i.e. in
+        // the coverage itself: 1.2% of π, three triangles' quantization).
+        prop_assert!(rel < 0.025, "{e0} vs {e1}: {rel}");
+    }
+}
