@@ -64,15 +64,13 @@ fn draw(runs: &[RunResult], rgb: &mut [u8]) -> std::result::Result<(), Box<dyn s
         .label_style(("sans-serif", 15))
         .draw()?;
 
-    let mut methods: Vec<&str> = runs.iter().map(|r| family(&r.method)).collect();
+    // One colour per method (each variant its own), one point per scene.
+    let mut methods: Vec<&str> = runs.iter().map(|r| r.method.as_str()).collect();
     methods.sort_unstable();
     methods.dedup();
     for (i, method) in methods.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
-        let mine: Vec<_> = points
-            .iter()
-            .filter(|p| family(&p.2.method) == *method)
-            .collect();
+        let mine: Vec<_> = points.iter().filter(|p| p.2.method == *method).collect();
         chart
             .draw_series(
                 mine.iter()
@@ -81,13 +79,8 @@ fn draw(runs: &[RunResult], rgb: &mut [u8]) -> std::result::Result<(), Box<dyn s
             .label(*method)
             .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
         chart.draw_series(mine.iter().map(|(x, y, r)| {
-            let label = if r.method.contains('-') {
-                format!("{} {}", r.scene, &r.method[method.len() + 1..])
-            } else {
-                r.scene.clone()
-            };
             Text::new(
-                label,
+                r.scene.clone(),
                 (*x * 1.04, *y * 1.04),
                 ("sans-serif", 13).into_font().color(&BLACK.mix(0.75)),
             )
@@ -102,11 +95,6 @@ fn draw(runs: &[RunResult], rgb: &mut [u8]) -> std::result::Result<(), Box<dyn s
         .draw()?;
     root.present()?;
     Ok(())
-}
-
-/// The method without its parameter ("raytrace-16" → "raytrace").
-fn family(method: &str) -> &str {
-    method.split('-').next().unwrap_or(method)
 }
 
 /// A log-scale range holding every value with a margin.

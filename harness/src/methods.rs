@@ -12,7 +12,11 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "hemi-raster",
-        "Kautz et al. 2004: CPU hemispherical rasterization to SH transfer (32×32 masks, order 5)",
+        "Kautz et al. 2004: CPU hemispherical rasterization to SH transfer (32×32 masks, order 5, two-level mesh hierarchy)",
+    ),
+    (
+        "hemi-raster:flat",
+        "the same without the hierarchy: every triangle blocks every vertex (what the hierarchy costs in error)",
     ),
     (
         "raytrace:N",
@@ -24,6 +28,7 @@ pub const METHODS: &[(&str, &str)] = &[
 pub const REPORT_METHODS: &[&str] = &[
     "unshadowed",
     "hemi-raster",
+    "hemi-raster:flat",
     "raytrace:4",
     "raytrace:16",
     "raytrace:64",

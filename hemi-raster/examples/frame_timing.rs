@@ -1,13 +1,14 @@
 //! Times one frame of hemi-raster on a wrinkled cloth of about 2,000
 //! vertices (the size of the paper's Table 1 models), per stage and per mask
-//! resolution. Run with `cargo run --release -p hemi-raster --example
+//! resolution, with the two-level mesh hierarchy (the default) and flat
+//! (every triangle for every vertex). Run with `cargo run --release -p hemi-raster --example
 //! frame_timing`.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use hemi_raster::{Config, HemiRaster, Integration, MaskResolution};
+use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution};
 use shadow_core::{Brdf, Camera, Environment, Mesh, Object, Result, Scene, ShadowMethod};
 
 /// A 1 m sheet of `n`×`n` vertices with crossing sine wrinkles.
@@ -58,19 +59,33 @@ fn main() -> Result<()> {
     )?;
     let frame = scene.frame_geometry(0)?;
     let sky = Environment::uniform(Vec3::ONE);
-    for (mask_resolution, lut_resolution, integration) in [
-        (MaskResolution::R16, 64, Integration::ShBlocks),
-        (MaskResolution::R32, 128, Integration::ShBlocks),
-        (MaskResolution::R32, 128, Integration::ShPixels),
-        (MaskResolution::R64, 256, Integration::ShBlocks),
+    let two_level = Hierarchy::default();
+    for (mask_resolution, lut_resolution, integration, hierarchy) in [
+        (MaskResolution::R16, 64, Integration::ShBlocks, two_level),
+        (MaskResolution::R32, 128, Integration::ShBlocks, two_level),
+        (
+            MaskResolution::R32,
+            128,
+            Integration::ShBlocks,
+            Hierarchy::Flat,
+        ),
+        (MaskResolution::R32, 128, Integration::ShPixels, two_level),
+        (MaskResolution::R64, 256, Integration::ShBlocks, two_level),
     ] {
         let mut method = HemiRaster::new(Config {
             mask_resolution,
             lut_resolution,
             integration,
+            hierarchy,
             ..Config::default()
         });
+        let start = Instant::now();
         method.prepare(&scene)?;
+        let prepare = start.elapsed();
+        let levels = match method.coarse_triangle_count(0) {
+            Some(coarse) => format!("two-level ({coarse} coarse triangles)"),
+            None => "flat".to_string(),
+        };
         let updates = (0..5)
             .map(|_| {
                 let start = Instant::now();
@@ -85,7 +100,7 @@ fn main() -> Result<()> {
         let shade = start.elapsed();
         let mean = shaded.flat().map(|l| l.x).sum::<f32>() / shaded.radiance[0].len() as f32;
         println!(
-            "{mask_resolution:?} LUT {lut_resolution} {integration:?}: LUT build {:?}, update {:?} (median of 5), relight {relight:?}, shade {shade:?}; mean radiance {mean:.3}",
+            "{mask_resolution:?} LUT {lut_resolution} {integration:?} {levels}: prepare {prepare:?} (LUT build {:?}), update {:?} (median of 5), relight {relight:?}, shade {shade:?}; mean radiance {mean:.3}",
             method.lut_build_time().unwrap_or_default(),
             median(updates),
         );

@@ -2,6 +2,7 @@
 
 mod config;
 mod disk;
+mod hierarchy;
 mod lut;
 mod mask;
 mod method;
@@ -13,7 +14,7 @@ mod properties;
 #[cfg(test)]
 mod test_util;
 
-pub use config::{BackfaceCulling, Config, MaskResolution};
+pub use config::{BackfaceCulling, Config, Hierarchy, MaskResolution, NearRings};
 pub use disk::{BLOCK, DiskGrid};
 pub use lut::PlaneLut;
 pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};

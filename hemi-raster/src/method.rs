@@ -11,7 +11,8 @@ use shadow_core::{
     ShadowMethod, VertexRadiance,
 };
 
-use crate::config::{BackfaceCulling, Config, MaskResolution};
+use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution};
+use crate::hierarchy::TwoLevel;
 use crate::mask::{Mask, MaskRow};
 use crate::rasterize::{Blockers, Rasterizer, Scratch};
 use crate::transfer::{Integration, direct_irradiance, pixel_angle, sh_transfer};
@@ -46,6 +47,8 @@ struct Prepared {
     /// Per object: whether its back faces are culled.
     cull: Vec<bool>,
     vertex_counts: Vec<usize>,
+    /// The coarse meshes and per-vertex blocker lists, unless flat.
+    hierarchy: Option<TwoLevel>,
 }
 
 enum Lighting {
@@ -86,12 +89,13 @@ impl<W: MaskRow> Pipeline<W> {
         })
     }
 
-    fn rasterize(&mut self, blockers: &Blockers) {
+    fn rasterize(&mut self, blockers: &Blockers, hierarchy: Option<&TwoLevel>) {
         let raster = &self.raster;
         self.masks = (0..blockers.vertex_count())
             .into_par_iter()
-            .map_init(Scratch::default, |scratch, v| {
-                blockers.mask(raster, v, scratch)
+            .map_init(Scratch::default, |scratch, v| match hierarchy {
+                Some(h) => h.mask(blockers, raster, v, scratch),
+                None => blockers.mask(raster, v, scratch),
             })
             .collect();
     }
@@ -176,6 +180,17 @@ impl HemiRaster {
         Some(with_pipeline!(self.engine.as_ref()?, p => p.blocked_fraction(v)))
     }
 
+    /// How many coarse triangles stand for `object` with
+    /// [`Hierarchy::TwoLevel`] (its full count when it was too small to
+    /// simplify); `None` in flat mode, before `prepare` or out of range.
+    pub fn coarse_triangle_count(&self, object: usize) -> Option<usize> {
+        self.scene
+            .as_ref()?
+            .hierarchy
+            .as_ref()?
+            .coarse_triangle_count(object)
+    }
+
     fn global_vertex(&self, object: usize, vertex: usize) -> Option<usize> {
         let counts = &self.scene.as_ref()?.vertex_counts;
         (vertex < *counts.get(object)?).then(|| counts[..object].iter().sum::<usize>() + vertex)
@@ -207,8 +222,13 @@ impl Default for HemiRaster {
 }
 
 impl ShadowMethod for HemiRaster {
+    /// `hemi-raster`, or `hemi-raster-flat` without the mesh hierarchy, so
+    /// that reports tell the two apart.
     fn name(&self) -> &str {
-        NAME
+        match self.config.hierarchy {
+            Hierarchy::Flat => "hemi-raster-flat",
+            Hierarchy::TwoLevel { .. } => NAME,
+        }
     }
 
     /// Any geometry, any number of objects; Lambert only, per vertex.
@@ -222,8 +242,10 @@ impl ShadowMethod for HemiRaster {
         }
     }
 
-    /// Checks the scene's needs, builds the plane table (first call only) and
-    /// decides back-face culling per object.
+    /// Checks the scene's needs, builds the plane table (first call only),
+    /// decides back-face culling per object and, with
+    /// [`Hierarchy::TwoLevel`], builds the coarse meshes and every vertex's
+    /// blocker lists.
     fn prepare(&mut self, scene: &Scene) -> Result<()> {
         self.capabilities().check(NAME, scene)?;
         if self.engine.is_none() {
@@ -238,6 +260,21 @@ impl ShadowMethod for HemiRaster {
                 BackfaceCulling::Off => false,
             })
             .collect();
+        let hierarchy = match self.config.hierarchy {
+            Hierarchy::Flat => None,
+            Hierarchy::TwoLevel {
+                coarse_divisor,
+                min_coarse_triangles,
+                near,
+                near_reach,
+            } => Some(TwoLevel::new(
+                scene,
+                coarse_divisor.get(),
+                min_coarse_triangles,
+                near,
+                near_reach,
+            )?),
+        };
         self.scene = Some(Prepared {
             materials: scene.objects().iter().map(|o| o.material).collect(),
             cull,
@@ -246,6 +283,7 @@ impl ShadowMethod for HemiRaster {
                 .iter()
                 .map(|o| o.mesh.vertex_count())
                 .collect(),
+            hierarchy,
         });
         self.frame = None;
         self.blockers = None;
@@ -273,7 +311,7 @@ impl ShadowMethod for HemiRaster {
             .as_mut()
             .ok_or_else(|| Self::stage_error("update before prepare"))?;
         let blockers = Blockers::new(frame, &prepared.cull);
-        with_pipeline!(engine, p => p.rasterize(&blockers));
+        with_pipeline!(engine, p => p.rasterize(&blockers, prepared.hierarchy.as_ref()));
         let order = self.config.order;
         match self.config.integration {
             Integration::ShBlocks | Integration::ShPixels => {

@@ -164,18 +164,18 @@ pub(crate) struct Blockers {
     y: Vec<f32>,
     z: Vec<f32>,
     normals: Vec<Vec3>,
-    triangles: Vec<[u32; 3]>,
+    pub(crate) triangles: Vec<[u32; 3]>,
     /// Per object: its triangles' range and whether its back faces are culled.
-    objects: Vec<(Range<usize>, bool)>,
+    pub(crate) objects: Vec<(Range<usize>, bool)>,
 }
 
 /// Per-thread buffers of the per-receiver loop: the blockers' positions in
 /// the current receiver's tangent frame.
 #[derive(Default)]
 pub(crate) struct Scratch {
-    x: Vec<f32>,
-    y: Vec<f32>,
-    z: Vec<f32>,
+    pub(crate) x: Vec<f32>,
+    pub(crate) y: Vec<f32>,
+    pub(crate) z: Vec<f32>,
 }
 
 impl Blockers {
@@ -215,6 +215,20 @@ impl Blockers {
     /// The tangent frame of vertex `v` (a global index).
     pub(crate) fn frame(&self, v: usize) -> TangentFrame {
         TangentFrame::new(Vec3::new(self.x[v], self.y[v], self.z[v]), self.normals[v])
+    }
+
+    /// Vertex `i` (a global index) in the tangent frame whose axes are the
+    /// columns of `m`, centred at `o`: the same arithmetic as the loop of
+    /// [`Blockers::mask`], so that both give bit-identical coordinates.
+    #[inline]
+    pub(crate) fn to_local(&self, o: Vec3, m: &Mat3, i: usize) -> Vec3 {
+        let (t, b, n) = (m.x_axis, m.y_axis, m.z_axis);
+        let (dx, dy, dz) = (self.x[i] - o.x, self.y[i] - o.y, self.z[i] - o.z);
+        Vec3::new(
+            t.x * dx + t.y * dy + t.z * dz,
+            b.x * dx + b.y * dy + b.z * dz,
+            n.x * dx + n.y * dy + n.z * dz,
+        )
     }
 
     /// The visibility mask of vertex `v`: every triangle of the frame but
