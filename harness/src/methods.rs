@@ -45,6 +45,13 @@ pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
             hemi_raster::Config::default(),
         )));
     }
+    if name == "hemi-raster:flat" {
+        let config = hemi_raster::Config {
+            hierarchy: hemi_raster::Hierarchy::Flat,
+            ..hemi_raster::Config::default()
+        };
+        return Ok(Box::new(hemi_raster::HemiRaster::new(config)));
+    }
     if let Some(n) = name.strip_prefix("raytrace:") {
         let iterations: u32 = n.parse().ok().filter(|&i| i >= 2).ok_or_else(|| {
             Error::InvalidScene(format!(
@@ -57,4 +64,31 @@ pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
         "unknown method {name:?}; methods are {}",
         METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_listed_and_reported_method_builds() {
+        for name in REPORT_METHODS {
+            assert!(by_name(name).is_ok(), "{name}");
+        }
+        for (name, _) in METHODS {
+            let name = name.replace(":N", ":8");
+            assert!(by_name(&name).is_ok(), "{name}");
+        }
+        assert_eq!(
+            by_name("hemi-raster:flat").unwrap().name(),
+            "hemi-raster-flat"
+        );
+        assert!(by_name("raytrace:1").is_err());
+        assert!(
+            by_name("nonesuch")
+                .unwrap_err()
+                .to_string()
+                .contains("unshadowed")
+        );
+    }
 }
