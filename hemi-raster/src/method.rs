@@ -196,13 +196,6 @@ impl HemiRaster {
         (vertex < *counts.get(object)?).then(|| counts[..object].iter().sum::<usize>() + vertex)
     }
 
-    fn stage_error(what: &str) -> Error {
-        Error::Stage {
-            method: NAME.into(),
-            what: what.into(),
-        }
-    }
-
     /// Direct integration: the per-vertex irradiance, once both the masks and
     /// the environment are there.
     fn integrate_direct(&mut self) {
@@ -298,7 +291,7 @@ impl ShadowMethod for HemiRaster {
         let prepared = self
             .scene
             .as_ref()
-            .ok_or_else(|| Self::stage_error("update before prepare"))?;
+            .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
         let counts: Vec<usize> = frame.objects.iter().map(|o| o.vertex_count()).collect();
         if counts != prepared.vertex_counts {
             return Err(Error::InvalidScene(format!(
@@ -309,7 +302,7 @@ impl ShadowMethod for HemiRaster {
         let engine = self
             .engine
             .as_mut()
-            .ok_or_else(|| Self::stage_error("update before prepare"))?;
+            .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
         let blockers = Blockers::new(frame, &prepared.cull);
         with_pipeline!(engine, p => p.rasterize(&blockers, prepared.hierarchy.as_ref()));
         let order = self.config.order;
@@ -354,15 +347,15 @@ impl ShadowMethod for HemiRaster {
         let frame = self
             .frame
             .as_ref()
-            .ok_or_else(|| Self::stage_error("shade before update"))?;
+            .ok_or_else(|| Error::stage(NAME, "shade before update"))?;
         let prepared = self
             .scene
             .as_ref()
-            .ok_or_else(|| Self::stage_error("shade before prepare"))?;
+            .ok_or_else(|| Error::stage(NAME, "shade before prepare"))?;
         let lighting = self
             .lighting
             .as_ref()
-            .ok_or_else(|| Self::stage_error("shade before relight"))?;
+            .ok_or_else(|| Error::stage(NAME, "shade before relight"))?;
         let n = self.config.order.coeff_count();
         // The irradiance of vertex v, from SH transfer or from direct sums.
         let transfer = &self.transfer;
@@ -372,7 +365,7 @@ impl ShadowMethod for HemiRaster {
                 let e = self
                     .irradiance
                     .as_deref()
-                    .ok_or_else(|| Self::stage_error("shade before relight"))?;
+                    .ok_or_else(|| Error::stage(NAME, "shade before relight"))?;
                 Box::new(move |v| e[v])
             }
         };
@@ -401,7 +394,7 @@ impl ShadowMethod for HemiRaster {
         let frame = self
             .frame
             .as_ref()
-            .ok_or_else(|| Self::stage_error("render before update"))?;
+            .ok_or_else(|| Error::stage(NAME, "render before update"))?;
         shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
     }
 }

@@ -63,6 +63,15 @@ impl Error {
         }
     }
 
+    /// A stage called before the stages it needs (see
+    /// [`ShadowMethod`](crate::ShadowMethod)).
+    pub fn stage(method: impl Into<String>, what: impl Into<String>) -> Self {
+        Error::Stage {
+            method: method.into(),
+            what: what.into(),
+        }
+    }
+
     /// A format error on `path`.
     pub fn format(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
         Error::Format {

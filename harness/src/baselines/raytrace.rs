@@ -33,26 +33,19 @@ impl RayTrace {
         }
     }
 
-    fn stage_error(&self, what: &str) -> Error {
-        Error::Stage {
-            method: self.name.clone(),
-            what: what.to_string(),
-        }
-    }
-
     fn ready(&self) -> Result<(&Scene, &FrameGeometry, Estimator<'_>)> {
         let scene = self
             .scene
             .as_ref()
-            .ok_or_else(|| self.stage_error("shade before prepare"))?;
+            .ok_or_else(|| Error::stage(&self.name, "shade before prepare"))?;
         let (frame, bvh) = self
             .frame
             .as_ref()
-            .ok_or_else(|| self.stage_error("shade before update"))?;
+            .ok_or_else(|| Error::stage(&self.name, "shade before update"))?;
         let sampler = self
             .sampler
             .as_ref()
-            .ok_or_else(|| self.stage_error("shade before relight"))?;
+            .ok_or_else(|| Error::stage(&self.name, "shade before relight"))?;
         Ok((
             scene,
             frame,

@@ -34,13 +34,6 @@ impl Unshadowed {
             glossy: Vec::new(),
         }
     }
-
-    fn stage_error(what: &str) -> Error {
-        Error::Stage {
-            method: "unshadowed".into(),
-            what: what.into(),
-        }
-    }
 }
 
 impl ShadowMethod for Unshadowed {
@@ -92,11 +85,11 @@ impl ShadowMethod for Unshadowed {
         let frame = self
             .frame
             .as_ref()
-            .ok_or_else(|| Self::stage_error("shade before update"))?;
+            .ok_or_else(|| Error::stage("unshadowed", "shade before update"))?;
         let irradiance = self
             .irradiance
             .as_ref()
-            .ok_or_else(|| Self::stage_error("shade before relight"))?;
+            .ok_or_else(|| Error::stage("unshadowed", "shade before relight"))?;
         let radiance = frame
             .objects
             .iter()
@@ -132,7 +125,7 @@ impl ShadowMethod for Unshadowed {
         let frame = self
             .frame
             .as_ref()
-            .ok_or_else(|| Self::stage_error("render before update"))?;
+            .ok_or_else(|| Error::stage("unshadowed", "render before update"))?;
         shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
     }
 }
