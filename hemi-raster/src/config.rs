@@ -4,6 +4,7 @@ use std::num::NonZeroU32;
 
 use shadow_core::sh::ShOrder;
 
+use crate::kernel::Simd;
 use crate::transfer::Integration;
 
 /// Pixels per side of the visibility mask (one machine word per row).
@@ -102,7 +103,7 @@ impl Default for Hierarchy {
 /// The default is the paper's setup (§3.1.1, §3.2): a 32×32 mask, a
 /// 6×128×128 plane table, 25-term SH (order 5: bands 0–4) integrated from the
 /// 4×4-block downsample, back faces culled on closed meshes, the two-level
-/// mesh hierarchy.
+/// mesh hierarchy, and the widest SIMD path the running CPU has.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Config {
     pub mask_resolution: MaskResolution,
@@ -115,6 +116,9 @@ pub struct Config {
     pub integration: Integration,
     pub backface_culling: BackfaceCulling,
     pub hierarchy: Hierarchy,
+    /// Which compilation of the per-receiver loop runs; `Auto` detects the
+    /// CPU's widest.
+    pub simd: Simd,
 }
 
 impl Default for Config {
@@ -126,6 +130,7 @@ impl Default for Config {
             integration: Integration::ShBlocks,
             backface_culling: BackfaceCulling::Auto,
             hierarchy: Hierarchy::default(),
+            simd: Simd::Auto,
         }
     }
 }

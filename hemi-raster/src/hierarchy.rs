@@ -59,11 +59,8 @@ use rayon::prelude::*;
 use shadow_core::{Adjacency, Error, Mesh, Result, Scene};
 
 use crate::config::NearRings;
-use crate::mask::{Mask, MaskRow};
-use crate::rasterize::{Blockers, Rasterizer, Scratch};
-
-/// "Not a coarse vertex" in [`TwoLevel::compact`].
-const NONE: u32 = u32::MAX;
+use crate::kernel::{Candidates, Corners};
+use crate::rasterize::Blockers;
 
 /// The static part of the hierarchy of a scene: coarse meshes and, per
 /// receiver, its near triangles and the coarse triangles it skips. Vertex and
@@ -71,14 +68,11 @@ const NONE: u32 = u32::MAX;
 /// [`Blockers`]).
 #[derive(Clone, Debug)]
 pub(crate) struct TwoLevel {
-    /// The global vertices the coarse triangles use, sorted.
-    coarse_vertices: Vec<u32>,
-    /// All objects' coarse triangles, as indices into `coarse_vertices`.
+    /// All objects' coarse triangles, over global vertex indices, so that
+    /// each frame's posed positions make them.
     coarse_triangles: Vec<[u32; 3]>,
     /// Per object: the range of its coarse triangles.
     coarse_objects: Vec<Range<usize>>,
-    /// Per global vertex: its index in `coarse_vertices`, or [`NONE`].
-    compact: Vec<u32>,
     /// Per global vertex: its object.
     vertex_object: Vec<u32>,
     /// Per global vertex (CSR): its near full-resolution triangles.
@@ -109,24 +103,22 @@ impl TwoLevel {
         reach: u8,
     ) -> Result<TwoLevel> {
         let mut h = TwoLevel {
-            coarse_vertices: Vec::new(),
             coarse_triangles: Vec::new(),
             coarse_objects: Vec::new(),
-            compact: Vec::new(),
             vertex_object: Vec::new(),
             near_offsets: vec![0],
             near: Vec::new(),
             skip_offsets: vec![0],
             skip: Vec::new(),
         };
-        let mut global_coarse: Vec<[u32; 3]> = Vec::new();
         let (mut vertex_base, mut triangle_base) = (0u32, 0u32);
         for (o, object) in scene.objects().iter().enumerate() {
             let mesh = &object.mesh;
             let levels = ObjectLevels::new(mesh, divisor, min_triangles, rings, reach)?;
-            let coarse_base = global_coarse.len();
-            global_coarse.extend(levels.coarse.iter().map(|t| t.map(|i| i + vertex_base)));
-            h.coarse_objects.push(coarse_base..global_coarse.len());
+            let coarse_base = h.coarse_triangles.len();
+            h.coarse_triangles
+                .extend(levels.coarse.iter().map(|t| t.map(|i| i + vertex_base)));
+            h.coarse_objects.push(coarse_base..h.coarse_triangles.len());
             for (near, skip) in levels.near {
                 h.near.extend(near.iter().map(|t| t + triangle_base));
                 h.near_offsets.push(h.near.len() as u32);
@@ -137,22 +129,6 @@ impl TwoLevel {
             vertex_base += mesh.vertex_count() as u32;
             triangle_base += mesh.triangle_count() as u32;
         }
-        h.compact = vec![NONE; vertex_base as usize];
-        for t in &global_coarse {
-            for &i in t {
-                h.compact[i as usize] = 0;
-            }
-        }
-        for (i, c) in h.compact.iter_mut().enumerate() {
-            if *c == 0 {
-                *c = h.coarse_vertices.len() as u32;
-                h.coarse_vertices.push(i as u32);
-            }
-        }
-        h.coarse_triangles = global_coarse
-            .iter()
-            .map(|t| t.map(|i| h.compact[i as usize]))
-            .collect();
         Ok(h)
     }
 
@@ -161,58 +137,33 @@ impl TwoLevel {
         self.coarse_objects.get(object).map(|r| r.len())
     }
 
-    /// The visibility mask of global vertex `v`: its near triangles at full
-    /// resolution and every coarse triangle, in the frame's positions.
-    pub(crate) fn mask<W: MaskRow>(
-        &self,
+    /// This frame's coarse triangles, laid out for the per-receiver loop.
+    pub(crate) fn corners(&self, blockers: &Blockers) -> Corners {
+        let groups = self
+            .coarse_objects
+            .iter()
+            .zip(&blockers.objects)
+            .map(|(range, (_, cull))| (range.clone(), *cull));
+        Corners::new(blockers, &self.coarse_triangles, groups)
+    }
+
+    /// What global vertex `v` rasterizes: its near triangles at full
+    /// resolution and every coarse triangle (`coarse`, from
+    /// [`TwoLevel::corners`]) but those it skips. Triangles through `v`
+    /// itself subtend no solid angle and are culled by the loop.
+    pub(crate) fn candidates<'a>(
+        &'a self,
         blockers: &Blockers,
-        raster: &Rasterizer<W>,
+        coarse: &'a Corners,
         v: usize,
-        scratch: &mut Scratch,
-    ) -> Mask<W> {
-        let frame = blockers.frame(v);
-        let (o, m) = (frame.origin(), frame.to_world());
-        let len = self.coarse_vertices.len();
-        scratch.x.resize(len, 0.0);
-        scratch.y.resize(len, 0.0);
-        scratch.z.resize(len, 0.0);
-        for (k, &g) in self.coarse_vertices.iter().enumerate() {
-            let p = blockers.to_local(o, &m, g as usize);
-            scratch.x[k] = p.x;
-            scratch.y[k] = p.y;
-            scratch.z[k] = p.z;
+    ) -> Candidates<'a> {
+        let csr = |offsets: &[u32], v: usize| offsets[v] as usize..offsets[v + 1] as usize;
+        Candidates::TwoLevel {
+            coarse,
+            skip: &self.skip[csr(&self.skip_offsets, v)],
+            near: &self.near[csr(&self.near_offsets, v)],
+            near_cull: blockers.objects[self.vertex_object[v] as usize].1,
         }
-        let at = |i: u32| {
-            let i = i as usize;
-            Vec3::new(scratch.x[i], scratch.y[i], scratch.z[i])
-        };
-        let me = self.compact[v];
-        let skip = &self.skip[self.skip_offsets[v] as usize..self.skip_offsets[v + 1] as usize];
-        let mut skip = skip.iter().copied().peekable();
-        let mut mask = Mask::EMPTY;
-        for (range, (_, cull)) in self.coarse_objects.iter().zip(&blockers.objects) {
-            for c in range.clone() {
-                if skip.next_if_eq(&(c as u32)).is_some() {
-                    continue;
-                }
-                let tri = self.coarse_triangles[c];
-                if tri.contains(&me) {
-                    continue;
-                }
-                raster.draw(tri.map(at), *cull, &mut mask);
-            }
-        }
-        let cull = blockers.objects[self.vertex_object[v] as usize].1;
-        let near = &self.near[self.near_offsets[v] as usize..self.near_offsets[v + 1] as usize];
-        for &t in near {
-            let tri = blockers.triangles[t as usize];
-            if tri.contains(&(v as u32)) {
-                continue;
-            }
-            let local = tri.map(|i| blockers.to_local(o, &m, i as usize));
-            raster.draw(local, cull, &mut mask);
-        }
-        mask
     }
 }
 

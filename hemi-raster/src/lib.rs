@@ -3,6 +3,7 @@
 mod config;
 mod disk;
 mod hierarchy;
+mod kernel;
 mod lut;
 mod mask;
 mod method;
@@ -16,6 +17,7 @@ mod test_util;
 
 pub use config::{BackfaceCulling, Config, Hierarchy, MaskResolution, NearRings};
 pub use disk::{BLOCK, DiskGrid};
+pub use kernel::Simd;
 pub use lut::PlaneLut;
 pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
 pub use method::HemiRaster;

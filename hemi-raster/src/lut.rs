@@ -120,36 +120,67 @@ impl<W: MaskRow> PlaneLut<W> {
     /// the negative faces, whose masks are complements, and empty
     /// otherwise). `None` for a zero or non-finite `m`.
     pub fn entry(&self, m: Vec3) -> Option<(&Mask<W>, &Mask<W>)> {
-        let abs = m.abs();
-        let face = if abs.x >= abs.y && abs.x >= abs.z {
-            0
-        } else if abs.y >= abs.z {
-            1
-        } else {
-            2
-        };
-        let major = m[face];
-        if !(major.abs() > 0.0 && major.is_finite()) {
+        if !m.is_finite() || m == Vec3::ZERO {
             return None;
         }
-        let inv = 1.0 / major.abs();
-        let n = self.resolution as f32;
-        let cell = |t: f32| (((t * inv + 1.0) * 0.5 * n) as usize).min(self.resolution - 1);
-        let (i, j) = (cell(m[(face + 1) % 3]), cell(m[(face + 2) % 3]));
-        Some(if major > 0.0 {
-            (
-                &self.masks[(face * self.resolution + j) * self.resolution + i],
-                &self.empty,
-            )
+        let code = cell_code(m, self.resolution as u32);
+        let flip = if code & 1 == 1 {
+            &self.disk
         } else {
-            // −m is in cell (N−1−i, N−1−j) of the positive face.
-            let (i, j) = (self.resolution - 1 - i, self.resolution - 1 - j);
-            (
-                &self.masks[(face * self.resolution + j) * self.resolution + i],
-                &self.disk,
-            )
-        })
+            &self.empty
+        };
+        Some((self.mask((code >> 1) as usize), flip))
     }
+
+    /// Stored mask `index` (the code of [`cell_code`] shifted right by one).
+    #[inline(always)]
+    pub(crate) fn mask(&self, index: usize) -> &Mask<W> {
+        &self.masks[index]
+    }
+
+    /// The disk pixels: the complement of a stored mask is taken within it.
+    pub(crate) fn disk(&self) -> &Mask<W> {
+        &self.disk
+    }
+}
+
+/// The cell of plane normal `m` (non-zero and finite; anything else gives
+/// an arbitrary code) in a table of `resolution`² cells per face, encoded as
+/// `index << 1 | complement`: `index` is the stored mask of the cell (on a
+/// positive face) and `complement` says whether `m` lies on the negative face,
+/// whose mask is the complement of the mirrored positive cell's.
+///
+/// The face is the axis a of m's largest component, the cell
+/// (⌊(u+1)/2·N⌋, ⌊(v+1)/2·N⌋) for u = m_{a+1}/|m_a|, v = m_{a+2}/|m_a| (axes
+/// cyclic). Written without branches or indexing by a variable axis, so that
+/// the per-receiver loop computes 16 codes at once; [`PlaneLut::entry`] uses
+/// it too, so both paths pick the same cells bit for bit.
+#[inline(always)]
+pub(crate) fn cell_code(m: Vec3, resolution: u32) -> u32 {
+    let abs = m.abs();
+    let x_major = (abs.x >= abs.y) & (abs.x >= abs.z);
+    let y_major = !x_major & (abs.y >= abs.z);
+    let (face, major, u, v) = if x_major {
+        (0, m.x, m.y, m.z)
+    } else if y_major {
+        (1, m.y, m.z, m.x)
+    } else {
+        (2, m.z, m.x, m.y)
+    };
+    let inv = 1.0 / major.abs();
+    let (n, last) = (resolution as f32, resolution as i32 - 1);
+    // Saturating casts: NaN and out-of-range lanes land in a valid cell.
+    let cell = |t: f32| ((((t * inv + 1.0) * 0.5 * n) as i32).clamp(0, last)) as u32;
+    let (i, j) = (cell(u), cell(v));
+    let negative = major < 0.0;
+    // −m is in cell (N−1−i, N−1−j) of the positive face.
+    let last = resolution - 1;
+    let (i, j) = if negative {
+        (last - i, last - j)
+    } else {
+        (i, j)
+    };
+    (((face * resolution + j) * resolution + i) << 1) | u32::from(negative)
 }
 
 /// The unit normal at the centre of cell (i, j) of positive face `face`.

@@ -108,6 +108,17 @@ impl<W: MaskRow> Mask<W> {
         self.rows.as_ref()
     }
 
+    /// The rows as their fixed-size array (whose length the compiler sees).
+    #[inline(always)]
+    pub(crate) fn rows_array(&self) -> &W::Rows {
+        &self.rows
+    }
+
+    /// The rows, mutable.
+    pub(crate) fn rows_mut(&mut self) -> &mut [W] {
+        self.rows.as_mut()
+    }
+
     /// Whether pixel (`row`, `col`) is set.
     ///
     /// # Panics

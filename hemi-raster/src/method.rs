@@ -13,8 +13,9 @@ use shadow_core::{
 
 use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution};
 use crate::hierarchy::TwoLevel;
+use crate::kernel::{Candidates, Corners, Scratch, Simd, receiver_mask};
 use crate::mask::{Mask, MaskRow};
-use crate::rasterize::{Blockers, Rasterizer, Scratch};
+use crate::rasterize::{Blockers, Rasterizer};
 use crate::transfer::{Integration, direct_irradiance, pixel_angle, sh_transfer};
 
 const NAME: &str = "hemi-raster";
@@ -77,25 +78,42 @@ macro_rules! with_pipeline {
 
 struct Pipeline<W: MaskRow> {
     raster: Rasterizer<W>,
+    /// The compilation of the per-receiver loop this CPU runs.
+    simd: Simd,
     /// The current frame's masks, one per vertex, all objects together.
     masks: Vec<Mask<W>>,
 }
 
 impl<W: MaskRow> Pipeline<W> {
-    fn new(lut_resolution: usize) -> Result<Pipeline<W>> {
+    fn new(config: &Config) -> Result<Pipeline<W>> {
         Ok(Pipeline {
-            raster: Rasterizer::new(lut_resolution)?,
+            raster: Rasterizer::new(config.lut_resolution)?,
+            simd: config.simd.resolve()?,
             masks: Vec::new(),
         })
     }
 
     fn rasterize(&mut self, blockers: &Blockers, hierarchy: Option<&TwoLevel>) {
-        let raster = &self.raster;
+        let corners = match hierarchy {
+            Some(h) => h.corners(blockers),
+            None => Corners::new(blockers, &blockers.triangles, blockers.objects.clone()),
+        };
+        let (lut, simd) = (self.raster.lut(), self.simd);
         self.masks = (0..blockers.vertex_count())
             .into_par_iter()
-            .map_init(Scratch::default, |scratch, v| match hierarchy {
-                Some(h) => h.mask(blockers, raster, v, scratch),
-                None => blockers.mask(raster, v, scratch),
+            .map_init(Scratch::default, |scratch, v| {
+                let candidates = match hierarchy {
+                    Some(h) => h.candidates(blockers, &corners, v),
+                    None => Candidates::All(&corners),
+                };
+                receiver_mask(
+                    simd,
+                    lut,
+                    blockers,
+                    &blockers.frame(v),
+                    &candidates,
+                    scratch,
+                )
             })
             .collect();
     }
@@ -129,9 +147,9 @@ impl<W: MaskRow> Pipeline<W> {
 impl Engine {
     fn new(config: &Config) -> Result<Engine> {
         Ok(match config.mask_resolution {
-            MaskResolution::R16 => Engine::R16(Box::new(Pipeline::new(config.lut_resolution)?)),
-            MaskResolution::R32 => Engine::R32(Box::new(Pipeline::new(config.lut_resolution)?)),
-            MaskResolution::R64 => Engine::R64(Box::new(Pipeline::new(config.lut_resolution)?)),
+            MaskResolution::R16 => Engine::R16(Box::new(Pipeline::new(config)?)),
+            MaskResolution::R32 => Engine::R32(Box::new(Pipeline::new(config)?)),
+            MaskResolution::R64 => Engine::R64(Box::new(Pipeline::new(config)?)),
         })
     }
 }

@@ -21,8 +21,10 @@
 //! reference offsets ray origins by a tiny ε along the normal, which makes
 //! such triangles cover a sliver of order ε: the two agree in the limit.
 //! Triangles with |det| ≤ 10⁻⁶·|a||b||c| (seen exactly edge-on, or touching
-//! the receiver) are skipped on the same grounds; triangles sharing the
-//! receiver's index are skipped without looking at them.
+//! the receiver) are skipped on the same grounds. A triangle through the
+//! receiver's own vertex has a corner at exactly (0, 0, 0) in its frame
+//! (the same float subtracted from itself), hence det = 0: no index test is
+//! needed.
 //!
 //! # Back-face culling
 //! det > 0 means the receiver is behind the triangle's plane (the
@@ -46,6 +48,26 @@ use crate::mask::{Mask, MaskRow};
 /// Triangles whose |det| falls below this fraction of |a||b||c| lie (nearly)
 /// in a plane through the receiver and subtend no solid angle.
 const DEGENERATE: f32 = 1e-6;
+
+/// Whether triangle (a, b, c), in tangent coordinates, survives culling
+/// (module docs: below the horizon, through the receiver, back-facing while
+/// `cull_back_faces`), and its three edge-plane normals oriented so that the
+/// triangle's cone is on their positive sides. Branch-free, so that the
+/// per-receiver loop evaluates it 16 triangles at a time; the normals are
+/// meaningless when the triangle is culled.
+#[inline(always)]
+pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> (bool, [Vec3; 3]) {
+    // Bitwise `|`/`&`: no branches in the vectorized loop.
+    let above = (a.z > 0.0) | (b.z > 0.0) | (c.z > 0.0);
+    let (ab, bc, ca) = (a.cross(b), b.cross(c), c.cross(a));
+    let det = ab.dot(c);
+    let scale = (a.length_squared() * b.length_squared() * c.length_squared()).sqrt();
+    // False for NaN too.
+    let spans_a_cone = det.abs() > DEGENERATE * scale;
+    let kept = above & spans_a_cone & !(cull_back_faces & (det > 0.0));
+    let s = if det < 0.0 { -1.0 } else { 1.0 };
+    (kept, [s * ab, s * bc, s * ca])
+}
 
 /// A receiver's tangent frame: origin at the vertex, z along its normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -112,23 +134,15 @@ impl<W: MaskRow> Rasterizer<W> {
     /// ORs triangle (a, b, c), given in tangent coordinates, into `mask`.
     /// Returns false when the triangle was culled: entirely below the horizon
     /// (all z ≤ 0), through the receiver (module docs), or back-facing while
-    /// `cull_back_faces`.
-    pub fn draw(&self, [a, b, c]: [Vec3; 3], cull_back_faces: bool, mask: &mut Mask<W>) -> bool {
-        if a.z <= 0.0 && b.z <= 0.0 && c.z <= 0.0 {
+    /// `cull_back_faces`. The reference the fast per-receiver loop is tested
+    /// against.
+    pub fn draw(&self, triangle: [Vec3; 3], cull_back_faces: bool, mask: &mut Mask<W>) -> bool {
+        let (kept, planes) = edge_planes(triangle, cull_back_faces);
+        if !kept {
             return false;
         }
-        let (ab, bc, ca) = (a.cross(b), b.cross(c), c.cross(a));
-        let det = ab.dot(c);
-        let scale = (a.length_squared() * b.length_squared() * c.length_squared()).sqrt();
-        // False for NaN too.
-        let spans_a_cone = det.abs() > DEGENERATE * scale;
-        if !spans_a_cone || (cull_back_faces && det > 0.0) {
-            return false;
-        }
-        let s = det.signum();
-        let lut = &self.lut;
-        match (lut.entry(s * ab), lut.entry(s * bc), lut.entry(s * ca)) {
-            (Some((ea, fa)), Some((eb, fb)), Some((ec, fc))) => {
+        match planes.map(|m| self.lut.entry(m)) {
+            [Some((ea, fa)), Some((eb, fb)), Some((ec, fc))] => {
                 mask.or_and3_xor([ea, eb, ec], [fa, fb, fc]);
                 true
             }
@@ -169,15 +183,6 @@ pub(crate) struct Blockers {
     pub(crate) objects: Vec<(Range<usize>, bool)>,
 }
 
-/// Per-thread buffers of the per-receiver loop: the blockers' positions in
-/// the current receiver's tangent frame.
-#[derive(Default)]
-pub(crate) struct Scratch {
-    pub(crate) x: Vec<f32>,
-    pub(crate) y: Vec<f32>,
-    pub(crate) z: Vec<f32>,
-}
-
 impl Blockers {
     /// Gathers a frame's vertices and triangles; `cull[o]` says whether
     /// object o's back faces are culled.
@@ -212,62 +217,15 @@ impl Blockers {
         self.x.len()
     }
 
+    /// Vertex `i` (a global index), world space.
+    #[inline(always)]
+    pub(crate) fn position(&self, i: usize) -> Vec3 {
+        Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+
     /// The tangent frame of vertex `v` (a global index).
     pub(crate) fn frame(&self, v: usize) -> TangentFrame {
         TangentFrame::new(Vec3::new(self.x[v], self.y[v], self.z[v]), self.normals[v])
-    }
-
-    /// Vertex `i` (a global index) in the tangent frame whose axes are the
-    /// columns of `m`, centred at `o`: the same arithmetic as the loop of
-    /// [`Blockers::mask`], so that both give bit-identical coordinates.
-    #[inline]
-    pub(crate) fn to_local(&self, o: Vec3, m: &Mat3, i: usize) -> Vec3 {
-        let (t, b, n) = (m.x_axis, m.y_axis, m.z_axis);
-        let (dx, dy, dz) = (self.x[i] - o.x, self.y[i] - o.y, self.z[i] - o.z);
-        Vec3::new(
-            t.x * dx + t.y * dy + t.z * dz,
-            b.x * dx + b.y * dy + b.z * dz,
-            n.x * dx + n.y * dy + n.z * dz,
-        )
-    }
-
-    /// The visibility mask of vertex `v`: every triangle of the frame but
-    /// those that use `v` rasterized into its tangent frame.
-    pub(crate) fn mask<W: MaskRow>(
-        &self,
-        raster: &Rasterizer<W>,
-        v: usize,
-        scratch: &mut Scratch,
-    ) -> Mask<W> {
-        let frame = self.frame(v);
-        let o = frame.origin();
-        let m = frame.to_world();
-        let (t, b, n) = (m.x_axis, m.y_axis, m.z_axis);
-        let len = self.vertex_count();
-        scratch.x.resize(len, 0.0);
-        scratch.y.resize(len, 0.0);
-        scratch.z.resize(len, 0.0);
-        for i in 0..len {
-            let (dx, dy, dz) = (self.x[i] - o.x, self.y[i] - o.y, self.z[i] - o.z);
-            scratch.x[i] = t.x * dx + t.y * dy + t.z * dz;
-            scratch.y[i] = b.x * dx + b.y * dy + b.z * dz;
-            scratch.z[i] = n.x * dx + n.y * dy + n.z * dz;
-        }
-        let at = |i: u32| {
-            let i = i as usize;
-            Vec3::new(scratch.x[i], scratch.y[i], scratch.z[i])
-        };
-        let v = v as u32;
-        let mut mask = Mask::EMPTY;
-        for (range, cull) in &self.objects {
-            for tri in &self.triangles[range.clone()] {
-                if tri.contains(&v) {
-                    continue;
-                }
-                raster.draw(tri.map(at), *cull, &mut mask);
-            }
-        }
-        mask
     }
 }
 

@@ -1,0 +1,679 @@
+//! The per-receiver loop of §3.1.1, laid out for throughput: every blocker
+//! triangle of a receiver goes through the same arithmetic as
+//! [`Rasterizer::draw`](crate::Rasterizer::draw), bit for bit, but in two
+//! phases so that the first runs 16 triangles wide in SIMD registers.
+//!
+//! 1. **Setup** (the paper's Table 2 "transform": moving blockers into the
+//!    receiver's frame and culling them), 16 triangles at a time with no
+//!    branch: the three corners go into the tangent frame, the triangle is
+//!    culled below the horizon, through the receiver or as a back face, the
+//!    three edge-plane normals are computed and turned into plane-table
+//!    cells, and the survivors' cells are appended to a list.
+//! 2. **Lookup** (the paper's "rasterization"): per survivor, the three plane
+//!    masks are ANDed and ORed into the visibility mask, one whole mask row
+//!    per SIMD lane.
+//!
+//! # Clusters
+//! The 16 triangles of a setup chunk are consecutive in their object's index
+//! buffer, which for scanned and authored meshes (and meshoptimizer's
+//! simplified ones) keeps them close in space. Each chunk's world bounding
+//! box is computed per frame, so it holds for rigid, skinned and deformed
+//! poses alike; a receiver skips every chunk whose box lies below its
+//! tangent plane (§3.2, hierarchical culling). The test keeps a margin of
+//! 10⁻⁵ of the box's distance, far above the rounding of the per-triangle
+//! test, so that a skipped chunk holds only triangles the per-triangle test
+//! would cull too: the masks are identical with and without it.
+//!
+//! # Instruction sets
+//! The loop is written once, as plain fixed-width loops that the compiler
+//! vectorizes, and compiled three times: for AVX-512, for AVX2 + FMA, and for
+//! the baseline of the build target. [`Simd::Auto`] picks the widest one
+//! the running CPU has (never what the build machine had), so a plain
+//! `cargo build --release` is fast everywhere. Rust never fuses a multiply
+//! and an add on its own, so the three give identical masks; the tests hold
+//! them to that.
+
+use std::ops::Range;
+
+use glam::Vec3;
+use shadow_core::{Error, Result};
+
+use crate::lut::{PlaneLut, cell_code};
+use crate::mask::{Mask, MaskRow};
+use crate::rasterize::{Blockers, TangentFrame, edge_planes};
+
+/// Triangles per setup chunk, and per cluster.
+pub(crate) const LANES: usize = 16;
+
+/// Which compilation of the per-receiver loop runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Simd {
+    /// The widest path the running CPU supports (detected at run time).
+    #[default]
+    Auto,
+    /// The build target's baseline instructions (SSE2 on x86-64): what any
+    /// CPU runs.
+    Portable,
+    /// AVX2 and FMA (x86-64 only).
+    Avx2,
+    /// AVX-512 F/BW/DQ/VL (x86-64 only).
+    Avx512,
+}
+
+impl Simd {
+    /// The path this CPU can run: `Auto` becomes the widest available; an
+    /// explicit path the CPU lacks is an error naming it.
+    pub fn resolve(self) -> Result<Simd> {
+        let available = Simd::available();
+        match self {
+            Simd::Auto => Ok(*available.last().unwrap_or(&Simd::Portable)),
+            s if available.contains(&s) => Ok(s),
+            s => Err(Error::stage(
+                "hemi-raster",
+                format!("the {s:?} path was asked for, but this CPU only runs {available:?}"),
+            )),
+        }
+    }
+
+    /// The paths this CPU runs, narrowest first.
+    pub fn available() -> Vec<Simd> {
+        let mut paths = vec![Simd::Portable];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                paths.push(Simd::Avx2);
+                if ["avx512f", "avx512bw", "avx512dq", "avx512vl"]
+                    .iter()
+                    .all(|f| avx512_feature(f))
+                {
+                    paths.push(Simd::Avx512);
+                }
+            }
+        }
+        paths
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+fn avx512_feature(name: &str) -> bool {
+    match name {
+        "avx512f" => std::arch::is_x86_feature_detected!("avx512f"),
+        "avx512bw" => std::arch::is_x86_feature_detected!("avx512bw"),
+        "avx512dq" => std::arch::is_x86_feature_detected!("avx512dq"),
+        _ => std::arch::is_x86_feature_detected!("avx512vl"),
+    }
+}
+
+/// Blocker triangles by corner, struct of arrays (ax, ay, az, bx, …, cz in
+/// world space), each object padded to whole chunks with NaN triangles,
+/// which every test culls. Built once per frame.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Corners {
+    corners: [Vec<f32>; 9],
+    /// Per chunk: the world bounding box of its corners (centre, half size).
+    boxes: Vec<(Vec3, Vec3)>,
+    /// Per object: its chunks, the number of its first triangle in the
+    /// numbering the corners were built from, and whether its back faces
+    /// are culled.
+    objects: Vec<Group>,
+}
+
+#[derive(Clone, Debug)]
+struct Group {
+    chunks: Range<usize>,
+    first_triangle: usize,
+    cull: bool,
+}
+
+impl Corners {
+    /// Gathers `triangles` (vertex indices into `blockers`), object by object
+    /// as `groups` gives them: (triangle range, back-face culling).
+    pub(crate) fn new(
+        blockers: &Blockers,
+        triangles: &[[u32; 3]],
+        groups: impl IntoIterator<Item = (Range<usize>, bool)>,
+    ) -> Corners {
+        let mut out = Corners::default();
+        for (range, cull) in groups {
+            out.push(
+                blockers,
+                triangles[range.clone()].iter().copied(),
+                range.start,
+                cull,
+            );
+        }
+        out
+    }
+
+    /// Appends one object's `triangles`, padded to whole chunks, and the
+    /// chunks' boxes. Allocation-free once the columns have grown.
+    fn push(
+        &mut self,
+        blockers: &Blockers,
+        triangles: impl ExactSizeIterator<Item = [u32; 3]>,
+        first_triangle: usize,
+        cull: bool,
+    ) {
+        let first_chunk = self.boxes.len();
+        let start = first_chunk * LANES;
+        let padded = (start + triangles.len()).next_multiple_of(LANES);
+        for column in &mut self.corners {
+            column.resize(padded, f32::NAN);
+        }
+        for (slot, t) in (start..).zip(triangles) {
+            for (k, &i) in t.iter().enumerate() {
+                let p = blockers.position(i as usize);
+                for axis in 0..3 {
+                    self.corners[3 * k + axis][slot] = p[axis];
+                }
+            }
+        }
+        for chunk in first_chunk..padded / LANES {
+            let lanes = chunk * LANES..(chunk + 1) * LANES;
+            // `f32::min`/`max` skip the NaN padding.
+            let extent = |axis: usize| {
+                (0..3).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), k| {
+                    let column = &self.corners[3 * k + axis][lanes.clone()];
+                    (
+                        column.iter().copied().fold(lo, f32::min),
+                        column.iter().copied().fold(hi, f32::max),
+                    )
+                })
+            };
+            let [(x0, x1), (y0, y1), (z0, z1)] = [0, 1, 2].map(extent);
+            let (lo, hi) = (Vec3::new(x0, y0, z0), Vec3::new(x1, y1, z1));
+            self.boxes.push(((lo + hi) * 0.5, (hi - lo) * 0.5));
+        }
+        self.objects.push(Group {
+            chunks: first_chunk..self.boxes.len(),
+            first_triangle,
+            cull,
+        });
+    }
+
+    /// The slot of triangle `t` in the numbering the corners were built
+    /// from.
+    fn slot(&self, t: usize) -> usize {
+        let o = self
+            .objects
+            .partition_point(|g| g.first_triangle <= t)
+            .saturating_sub(1);
+        let g = &self.objects[o];
+        g.chunks.start * LANES + (t - g.first_triangle)
+    }
+
+    fn slots(&self) -> usize {
+        self.boxes.len() * LANES
+    }
+
+    fn clear(&mut self) {
+        self.corners.iter_mut().for_each(Vec::clear);
+        self.boxes.clear();
+        self.objects.clear();
+    }
+
+    /// The nine corner columns of `chunk`.
+    #[inline(always)]
+    fn chunk(&self, chunk: usize) -> [&[f32; LANES]; 9] {
+        let lanes = chunk * LANES..(chunk + 1) * LANES;
+        std::array::from_fn(|k| {
+            self.corners[k][lanes.clone()]
+                .try_into()
+                .expect("columns are whole chunks")
+        })
+    }
+}
+
+/// What one receiver rasterizes.
+pub(crate) enum Candidates<'a> {
+    /// Every triangle of the frame.
+    All(&'a Corners),
+    /// §3.2's two levels: the coarse triangles minus `skip` (sorted, in the
+    /// numbering `coarse` was built from), and the near fine triangles
+    /// (indices into [`Blockers`]' triangles) with their object's culling.
+    TwoLevel {
+        coarse: &'a Corners,
+        skip: &'a [u32],
+        near: &'a [u32],
+        near_cull: bool,
+    },
+}
+
+/// Per-thread buffers of the loop, reused from receiver to receiver: after
+/// the first few receivers it allocates nothing.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    /// Three plane-cell codes per surviving triangle.
+    survivors: Vec<u32>,
+    /// Skipped coarse slots, one bit each.
+    skip: Vec<u64>,
+    /// The current receiver's near triangles, gathered.
+    near: Corners,
+}
+
+/// The visibility mask of the receiver with tangent frame `frame`, on the
+/// `simd` path (which must come from [`Simd::resolve`]).
+pub(crate) fn receiver_mask<W: MaskRow>(
+    simd: Simd,
+    lut: &PlaneLut<W>,
+    blockers: &Blockers,
+    frame: &TangentFrame,
+    candidates: &Candidates,
+    scratch: &mut Scratch,
+) -> Mask<W> {
+    let job = Job {
+        lut,
+        blockers,
+        frame,
+        candidates,
+    };
+    match simd {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Simd::resolve` only yields Avx512 on CPUs that have it.
+        Simd::Avx512 => unsafe { job.run_avx512(scratch) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Simd::resolve` only yields Avx2 on CPUs that have it.
+        Simd::Avx2 => unsafe { job.run_avx2(scratch) },
+        _ => job.run(scratch),
+    }
+}
+
+struct Job<'a, W: MaskRow> {
+    lut: &'a PlaneLut<W>,
+    blockers: &'a Blockers,
+    frame: &'a TangentFrame,
+    candidates: &'a Candidates<'a>,
+}
+
+/// The receiver's origin and the rows of world-to-tangent.
+#[derive(Clone, Copy)]
+struct Frame {
+    o: Vec3,
+    t: Vec3,
+    b: Vec3,
+    n: Vec3,
+}
+
+impl Frame {
+    /// World point (x, y, z) in tangent coordinates: the arithmetic of
+    /// [`TangentFrame::to_local`], term for term.
+    #[inline(always)]
+    fn local(&self, x: f32, y: f32, z: f32) -> Vec3 {
+        let (t, b, n, o) = (self.t, self.b, self.n, self.o);
+        let (dx, dy, dz) = (x - o.x, y - o.y, z - o.z);
+        Vec3::new(
+            t.x * dx + t.y * dy + t.z * dz,
+            b.x * dx + b.y * dy + b.z * dz,
+            n.x * dx + n.y * dy + n.z * dz,
+        )
+    }
+
+    /// Whether the box (centre, half size) lies below the tangent plane with
+    /// a margin far above the rounding of [`Frame::local`] (module docs).
+    #[inline(always)]
+    fn below(&self, centre: Vec3, half: Vec3) -> bool {
+        let top = self.n.dot(centre - self.o) + self.n.abs().dot(half);
+        let scale = self.o.abs().element_sum() + centre.abs().element_sum() + half.element_sum();
+        top < -1e-5 * scale
+    }
+}
+
+impl<W: MaskRow> Job<'_, W> {
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,avx2,fma,bmi1,bmi2,popcnt")]
+    fn run_avx512(&self, scratch: &mut Scratch) -> Mask<W> {
+        self.run(scratch)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,popcnt")]
+    fn run_avx2(&self, scratch: &mut Scratch) -> Mask<W> {
+        self.run(scratch)
+    }
+
+    #[inline(always)]
+    fn run(&self, scratch: &mut Scratch) -> Mask<W> {
+        let m = self.frame.to_world();
+        let frame = Frame {
+            o: self.frame.origin(),
+            t: m.x_axis,
+            b: m.y_axis,
+            n: m.z_axis,
+        };
+        let resolution = self.lut.resolution() as u32;
+        let Scratch {
+            survivors,
+            skip,
+            near,
+        } = scratch;
+        let mut count = 0;
+        match *self.candidates {
+            Candidates::All(corners) => {
+                fit(survivors, corners.slots());
+                for g in &corners.objects {
+                    for chunk in g.chunks.clone() {
+                        setup(
+                            corners, chunk, g.cull, 0, &frame, resolution, survivors, &mut count,
+                        );
+                    }
+                }
+            }
+            Candidates::TwoLevel {
+                coarse,
+                skip: skipped,
+                near: near_triangles,
+                near_cull,
+            } => {
+                near.clear();
+                let triangles = &self.blockers.triangles;
+                let gathered = near_triangles.iter().map(|&t| triangles[t as usize]);
+                near.push(self.blockers, gathered, 0, near_cull);
+                fit(survivors, coarse.slots() + near.slots());
+                skip.clear();
+                skip.resize(coarse.slots().div_ceil(64), 0);
+                for &c in skipped {
+                    let slot = coarse.slot(c as usize);
+                    skip[slot / 64] |= 1 << (slot % 64);
+                }
+                for g in &coarse.objects {
+                    for chunk in g.chunks.clone() {
+                        // LANES divides 64: a chunk's bits share a word.
+                        let bit = chunk * LANES;
+                        let skipped = (skip[bit / 64] >> (bit % 64)) as u32 & CHUNK_BITS;
+                        setup(
+                            coarse, chunk, g.cull, skipped, &frame, resolution, survivors,
+                            &mut count,
+                        );
+                    }
+                }
+                for chunk in 0..near.boxes.len() {
+                    setup(
+                        near, chunk, near_cull, 0, &frame, resolution, survivors, &mut count,
+                    );
+                }
+            }
+        }
+        let mut mask = Mask::EMPTY;
+        self.lookup(&survivors[..count], &mut mask);
+        mask
+    }
+
+    /// Phase 2: per surviving triangle, AND its three plane masks and OR
+    /// the result into `mask`. A plane whose normal fell on a negative cube
+    /// face stands for the complement of its stored mask (see
+    /// [`PlaneLut::entry`]): it is inverted whole here, which also sets the
+    /// pixels outside the disk, so the mask is clipped to the disk once at
+    /// the end rather than per triangle.
+    #[inline(always)]
+    fn lookup(&self, survivors: &[u32], mask: &mut Mask<W>) {
+        let mut acc = W::EMPTY_ROWS;
+        for s in survivors.chunks_exact(3) {
+            let plane = |k: usize| {
+                let flip = if s[k] & 1 == 1 { !W::ZERO } else { W::ZERO };
+                (self.lut.mask((s[k] >> 1) as usize).rows_array(), flip)
+            };
+            let ((a, fa), (b, fb), (c, fc)) = (plane(0), plane(1), plane(2));
+            let (a, b, c) = (a.as_ref(), b.as_ref(), c.as_ref());
+            for (i, out) in acc.as_mut().iter_mut().enumerate() {
+                *out = *out | ((a[i] ^ fa) & (b[i] ^ fb) & (c[i] ^ fc));
+            }
+        }
+        let disk = self.lut.disk().rows_array().as_ref();
+        for (out, (&a, &d)) in mask
+            .rows_mut()
+            .iter_mut()
+            .zip(acc.as_ref().iter().zip(disk))
+        {
+            *out = a & d;
+        }
+    }
+}
+
+/// Every lane of a chunk.
+const CHUNK_BITS: u32 = (1 << LANES) - 1;
+
+/// Makes room for three codes per slot plus one chunk of overrun (the
+/// compaction writes every lane and advances only past survivors).
+fn fit(survivors: &mut Vec<u32>, slots: usize) {
+    let need = 3 * (slots + LANES);
+    if survivors.len() < need {
+        survivors.resize(need, 0);
+    }
+}
+
+/// Phase 1 on one chunk: appends the plane-cell codes of its surviving
+/// triangles (not in `skipped`, a bit per lane) at `survivors[*count..]`.
+/// Straight-line code over fixed-size arrays: the compiler turns the first
+/// loop into SIMD instructions, 16 triangles per pass.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn setup(
+    corners: &Corners,
+    chunk: usize,
+    cull: bool,
+    skipped: u32,
+    frame: &Frame,
+    resolution: u32,
+    survivors: &mut [u32],
+    count: &mut usize,
+) {
+    let (centre, half) = corners.boxes[chunk];
+    if frame.below(centre, half) {
+        return;
+    }
+    let c = corners.chunk(chunk);
+    // Each step is a short loop over the lanes with arrays in and out: the
+    // shape the vectorizer turns into a few SIMD instructions per step.
+    let mut local = [[0.0f32; LANES]; 9];
+    for k in 0..3 {
+        for l in 0..LANES {
+            let p = frame.local(c[3 * k][l], c[3 * k + 1][l], c[3 * k + 2][l]);
+            local[3 * k][l] = p.x;
+            local[3 * k + 1][l] = p.y;
+            local[3 * k + 2][l] = p.z;
+        }
+    }
+    let mut planes = [[0.0f32; LANES]; 9];
+    let mut keep = [0u32; LANES];
+    for l in 0..LANES {
+        let corner =
+            |k: usize| Vec3::new(local[3 * k][l], local[3 * k + 1][l], local[3 * k + 2][l]);
+        let (kept, m) = edge_planes([corner(0), corner(1), corner(2)], cull);
+        for (e, m) in m.iter().enumerate() {
+            planes[3 * e][l] = m.x;
+            planes[3 * e + 1][l] = m.y;
+            planes[3 * e + 2][l] = m.z;
+        }
+        keep[l] = u32::from(kept) & !(skipped >> l) & 1;
+    }
+    let mut codes = [[0u32; LANES]; 3];
+    for (e, codes) in codes.iter_mut().enumerate() {
+        for (l, code) in codes.iter_mut().enumerate() {
+            let m = Vec3::new(planes[3 * e][l], planes[3 * e + 1][l], planes[3 * e + 2][l]);
+            *code = cell_code(m, resolution);
+        }
+    }
+    // Compaction: every lane is written, only survivors advance.
+    for l in 0..LANES {
+        survivors[*count..*count + 3].copy_from_slice(&[codes[0][l], codes[1][l], codes[2][l]]);
+        *count += 3 * keep[l] as usize;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rasterize::Rasterizer;
+    use crate::test_util::{grid, icosphere};
+    use shadow_core::{Brdf, Camera, Mesh, Object, Scene};
+    use std::sync::Arc;
+
+    const FAR: Vec3 = Vec3::new(40.0, -3.0, 25.0);
+
+    /// A bumpy closed sphere over an open floor, with a second small sphere
+    /// sunk into the floor (interpenetration), far from the origin so that
+    /// rounding in the frame transform is exercised.
+    fn scene() -> Scene {
+        let bumpy = icosphere(Vec3::new(0.0, 0.7, 0.0), 0.5, 3);
+        let positions = bumpy
+            .positions()
+            .iter()
+            .map(|p| {
+                let d = *p - Vec3::new(0.0, 0.7, 0.0);
+                Vec3::new(0.0, 0.7, 0.0) + d * (1.0 + 0.25 * (9.0 * d.x).sin() * (7.0 * d.z).cos())
+            })
+            .collect();
+        let bumpy = Mesh::new("bumpy", positions, None, bumpy.triangles().to_vec()).unwrap();
+        let material = Brdf::lambert(Vec3::splat(0.5)).unwrap();
+        let objects = [
+            bumpy,
+            grid(0.0, 1.5, 12),
+            icosphere(Vec3::new(0.8, 0.05, 0.3), 0.2, 1),
+        ]
+        .into_iter()
+        .map(|m| {
+            let far = m.positions().iter().map(|&p| p + FAR).collect();
+            Object {
+                mesh: Arc::new(Mesh::new(m.name(), far, None, m.triangles().to_vec()).unwrap()),
+                material,
+            }
+        })
+        .collect();
+        let camera = Camera::new(FAR + Vec3::new(0.0, 3.0, 5.0), FAR, Vec3::Y, 0.8, 8, 8).unwrap();
+        Scene::still("kernel test", objects, camera).unwrap()
+    }
+
+    /// The scalar reference: every candidate triangle through
+    /// [`Rasterizer::draw`].
+    fn reference<W: MaskRow>(
+        raster: &Rasterizer<W>,
+        frame: &TangentFrame,
+        triangles: impl IntoIterator<Item = ([Vec3; 3], bool)>,
+    ) -> Mask<W> {
+        let mut mask = Mask::EMPTY;
+        for (t, cull) in triangles {
+            raster.draw(t.map(|p| frame.to_local(p)), cull, &mut mask);
+        }
+        mask
+    }
+
+    fn every_path_matches_draw<W: MaskRow>(lut_resolution: usize) {
+        let scene = scene();
+        let geometry = scene.frame_geometry(0).unwrap();
+        let cull = [true, false, true];
+        let blockers = Blockers::new(&geometry, &cull);
+        let raster = Rasterizer::<W>::new(lut_resolution).unwrap();
+        let all = Corners::new(&blockers, &blockers.triangles, blockers.objects.clone());
+        let world = |t: [u32; 3]| t.map(|i| blockers.position(i as usize));
+        let object_of = |t: usize| {
+            blockers
+                .objects
+                .iter()
+                .position(|(r, _)| r.contains(&t))
+                .unwrap()
+        };
+        let mut scratch = Scratch::default();
+        let mut blocked = 0;
+        for v in (0..blockers.vertex_count()).step_by(7) {
+            let frame = blockers.frame(v);
+            let truth = reference(
+                &raster,
+                &frame,
+                blockers
+                    .triangles
+                    .iter()
+                    .enumerate()
+                    .map(|(t, &tri)| (world(tri), cull[object_of(t)])),
+            );
+            blocked += usize::from(!truth.is_empty());
+            // A two-level candidate list: every third triangle as "coarse"
+            // (some skipped), every fifth as "near".
+            let coarse_triangles: Vec<[u32; 3]> =
+                blockers.triangles.iter().copied().step_by(3).collect();
+            let coarse = Corners::new(
+                &blockers,
+                &coarse_triangles,
+                [(0..coarse_triangles.len(), true)],
+            );
+            let skip: Vec<u32> = (0..coarse_triangles.len() as u32)
+                .filter(|c| (c + v as u32).is_multiple_of(11))
+                .collect();
+            let near: Vec<u32> = (0..blockers.triangles.len() as u32).step_by(5).collect();
+            let two_truth = reference(
+                &raster,
+                &frame,
+                coarse_triangles
+                    .iter()
+                    .enumerate()
+                    .filter(|(c, _)| !skip.contains(&(*c as u32)))
+                    .map(|(_, &t)| (world(t), true))
+                    .chain(
+                        near.iter()
+                            .map(|&t| (world(blockers.triangles[t as usize]), false)),
+                    ),
+            );
+            let two_level = Candidates::TwoLevel {
+                coarse: &coarse,
+                skip: &skip,
+                near: &near,
+                near_cull: false,
+            };
+            for simd in Simd::available() {
+                let got = receiver_mask(
+                    simd,
+                    raster.lut(),
+                    &blockers,
+                    &frame,
+                    &Candidates::All(&all),
+                    &mut scratch,
+                );
+                assert_eq!(got, truth, "{simd:?}, receiver {v}");
+                let got = receiver_mask(
+                    simd,
+                    raster.lut(),
+                    &blockers,
+                    &frame,
+                    &two_level,
+                    &mut scratch,
+                );
+                assert_eq!(got, two_truth, "{simd:?} two-level, receiver {v}");
+            }
+        }
+        assert!(blocked > 20, "the scene must shadow: {blocked}");
+    }
+
+    #[test]
+    fn every_path_matches_the_scalar_rasterizer_bit_for_bit() {
+        every_path_matches_draw::<u16>(32);
+        every_path_matches_draw::<u32>(128);
+        every_path_matches_draw::<u64>(64);
+    }
+
+    #[test]
+    fn paths_resolve_to_what_the_cpu_has() {
+        let available = Simd::available();
+        assert_eq!(available[0], Simd::Portable);
+        assert_eq!(Simd::Auto.resolve().unwrap(), *available.last().unwrap());
+        assert_eq!(Simd::Portable.resolve().unwrap(), Simd::Portable);
+        for s in [Simd::Avx2, Simd::Avx512] {
+            assert_eq!(s.resolve().is_ok(), available.contains(&s));
+        }
+    }
+
+    /// Chunks below the horizon are skipped whole: for a receiver on top of
+    /// a floor-level sphere looking up, the floor's boxes are all below.
+    #[test]
+    fn boxes_below_the_tangent_plane_are_found() {
+        let frame = Frame {
+            o: Vec3::new(0.0, 1.0, 0.0),
+            t: Vec3::X,
+            b: Vec3::NEG_Z,
+            n: Vec3::Y,
+        };
+        assert!(frame.below(Vec3::ZERO, Vec3::new(5.0, 0.5, 5.0)));
+        assert!(!frame.below(Vec3::ZERO, Vec3::new(5.0, 1.0, 5.0)));
+        assert!(!frame.below(Vec3::new(0.0, 2.0, 0.0), Vec3::splat(0.1)));
+    }
+}
