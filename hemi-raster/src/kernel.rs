@@ -34,11 +34,12 @@
 //! them to that.
 
 use std::ops::Range;
+use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use shadow_core::{Error, Result};
 
-use crate::lut::{PlaneLut, cell_code};
+use crate::lut::{PlaneLut, plane_code};
 use crate::mask::{Mask, MaskRow};
 use crate::rasterize::{Blockers, TangentFrame, edge_planes};
 
@@ -114,6 +115,8 @@ pub(crate) struct Corners {
     corners: [Vec<f32>; 9],
     /// Per chunk: the world bounding box of its corners (centre, half size).
     boxes: Vec<(Vec3, Vec3)>,
+    /// Real (unpadded) triangles.
+    triangles: usize,
     /// Per object: its chunks, the number of its first triangle in the
     /// numbering the corners were built from, and whether its back faces
     /// are culled.
@@ -142,22 +145,26 @@ impl Corners {
                 triangles[range.clone()].iter().copied(),
                 range.start,
                 cull,
+                true,
             );
         }
         out
     }
 
     /// Appends one object's `triangles`, padded to whole chunks, and the
-    /// chunks' boxes. Allocation-free once the columns have grown.
+    /// chunks' boxes (or, unless `boxed`, boxes that are never culled).
+    /// Allocation-free once the columns have grown.
     fn push(
         &mut self,
         blockers: &Blockers,
         triangles: impl ExactSizeIterator<Item = [u32; 3]>,
         first_triangle: usize,
         cull: bool,
+        boxed: bool,
     ) {
         let first_chunk = self.boxes.len();
         let start = first_chunk * LANES;
+        self.triangles += triangles.len();
         let padded = (start + triangles.len()).next_multiple_of(LANES);
         for column in &mut self.corners {
             column.resize(padded, f32::NAN);
@@ -170,7 +177,12 @@ impl Corners {
                 }
             }
         }
-        for chunk in first_chunk..padded / LANES {
+        if !boxed {
+            // Never below any horizon.
+            let everywhere = (Vec3::ZERO, Vec3::INFINITY);
+            self.boxes.resize(padded / LANES, everywhere);
+        }
+        for chunk in (first_chunk..padded / LANES).filter(|_| boxed) {
             let lanes = chunk * LANES..(chunk + 1) * LANES;
             // `f32::min`/`max` skip the NaN padding.
             let extent = |axis: usize| {
@@ -212,6 +224,7 @@ impl Corners {
         self.corners.iter_mut().for_each(Vec::clear);
         self.boxes.clear();
         self.objects.clear();
+        self.triangles = 0;
     }
 
     /// The nine corner columns of `chunk`.
@@ -241,6 +254,19 @@ pub(crate) enum Candidates<'a> {
     },
 }
 
+impl Candidates<'_> {
+    /// How many triangles the receiver considers (the paper's Table 1
+    /// "Avg. #Tris" per vertex).
+    pub(crate) fn count(&self) -> usize {
+        match self {
+            Candidates::All(corners) => corners.triangles,
+            Candidates::TwoLevel {
+                coarse, skip, near, ..
+            } => coarse.triangles - skip.len() + near.len(),
+        }
+    }
+}
+
 /// Per-thread buffers of the loop, reused from receiver to receiver: after
 /// the first few receivers it allocates nothing.
 #[derive(Default)]
@@ -251,6 +277,34 @@ pub(crate) struct Scratch {
     skip: Vec<u64>,
     /// The current receiver's near triangles, gathered.
     near: Corners,
+    /// Time and counts of the two phases, when profiling.
+    profile: Option<LoopProfile>,
+}
+
+impl Scratch {
+    /// Buffers that also time the loop's phases.
+    pub(crate) fn profiling() -> Scratch {
+        Scratch {
+            profile: Some(LoopProfile::default()),
+            ..Scratch::default()
+        }
+    }
+
+    /// What the phases took so far, when profiling.
+    pub(crate) fn profile(&self) -> Option<LoopProfile> {
+        self.profile
+    }
+}
+
+/// Where the loop's time went, summed over receivers (the paper's Table 2
+/// split): the setup ("transform": blockers into the receiver's frame,
+/// culling, plane cells) and the lookups ("rasterization").
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct LoopProfile {
+    pub(crate) transform: Duration,
+    pub(crate) rasterization: Duration,
+    /// Triangles that survived culling and were looked up.
+    pub(crate) survivors: u64,
 }
 
 /// The visibility mask of the receiver with tangent frame `frame`, on the
@@ -343,10 +397,12 @@ impl<W: MaskRow> Job<'_, W> {
             n: m.z_axis,
         };
         let resolution = self.lut.resolution() as u32;
+        let start = scratch.profile.is_some().then(Instant::now);
         let Scratch {
             survivors,
             skip,
             near,
+            profile,
         } = scratch;
         let mut count = 0;
         match *self.candidates {
@@ -369,7 +425,8 @@ impl<W: MaskRow> Job<'_, W> {
                 near.clear();
                 let triangles = &self.blockers.triangles;
                 let gathered = near_triangles.iter().map(|&t| triangles[t as usize]);
-                near.push(self.blockers, gathered, 0, near_cull);
+                // Near triangles are near: their boxes would not cull.
+                near.push(self.blockers, gathered, 0, near_cull, false);
                 fit(survivors, coarse.slots() + near.slots());
                 skip.clear();
                 skip.resize(coarse.slots().div_ceil(64), 0);
@@ -395,32 +452,49 @@ impl<W: MaskRow> Job<'_, W> {
                 }
             }
         }
+        let setup_end = start.map(|_| Instant::now());
         let mut mask = Mask::EMPTY;
         self.lookup(&survivors[..count], &mut mask);
+        if let (Some(p), Some(start), Some(setup_end)) = (profile, start, setup_end) {
+            p.transform += setup_end - start;
+            p.rasterization += setup_end.elapsed();
+            p.survivors += (count / 3) as u64;
+        }
         mask
     }
 
     /// Phase 2: per surviving triangle, AND its three plane masks and OR
-    /// the result into `mask`. A plane whose normal fell on a negative cube
-    /// face stands for the complement of its stored mask (see
-    /// [`PlaneLut::entry`]): it is inverted whole here, which also sets the
-    /// pixels outside the disk, so the mask is clipped to the disk once at
-    /// the end rather than per triangle.
+    /// the result into `mask`. A plane mask is a stored mask, mirrored top to
+    /// bottom (with folded rows, by reading the two halves of storage
+    /// swapped) and complemented within the disk as its code says (see
+    /// [`PlaneLut`]). The complement is taken against all ones here, which
+    /// also sets the pixels outside the disk, so the mask is clipped to the
+    /// disk once at the end rather than per triangle.
     #[inline(always)]
     fn lookup(&self, survivors: &[u32], mask: &mut Mask<W>) {
+        let half = W::RESOLUTION / 2;
         let mut acc = W::EMPTY_ROWS;
+        let (top, bottom) = acc.as_mut().split_at_mut(half);
         for s in survivors.chunks_exact(3) {
             let plane = |k: usize| {
-                let flip = if s[k] & 1 == 1 { !W::ZERO } else { W::ZERO };
-                (self.lut.mask((s[k] >> 1) as usize).rows_array(), flip)
+                let code = s[k];
+                let rows = self.lut.mask((code >> 2) as usize).rows();
+                let (first, second) = rows.split_at(half);
+                let (top, bottom) = if code & 2 != 0 {
+                    (second, first)
+                } else {
+                    (first, second)
+                };
+                let flip = if code & 1 != 0 { !W::ZERO } else { W::ZERO };
+                (&top[..half], &bottom[..half], flip)
             };
-            let ((a, fa), (b, fb), (c, fc)) = (plane(0), plane(1), plane(2));
-            let (a, b, c) = (a.as_ref(), b.as_ref(), c.as_ref());
-            for (i, out) in acc.as_mut().iter_mut().enumerate() {
-                *out = *out | ((a[i] ^ fa) & (b[i] ^ fb) & (c[i] ^ fc));
+            let ((a0, a1, fa), (b0, b1, fb), (c0, c1, fc)) = (plane(0), plane(1), plane(2));
+            for i in 0..half {
+                top[i] = top[i] | ((a0[i] ^ fa) & (b0[i] ^ fb) & (c0[i] ^ fc));
+                bottom[i] = bottom[i] | ((a1[i] ^ fa) & (b1[i] ^ fb) & (c1[i] ^ fc));
             }
         }
-        let disk = self.lut.disk().rows_array().as_ref();
+        let disk = self.lut.disk().rows();
         for (out, (&a, &d)) in mask
             .rows_mut()
             .iter_mut()
@@ -492,7 +566,7 @@ fn setup(
     for (e, codes) in codes.iter_mut().enumerate() {
         for (l, code) in codes.iter_mut().enumerate() {
             let m = Vec3::new(planes[3 * e][l], planes[3 * e + 1][l], planes[3 * e + 2][l]);
-            *code = cell_code(m, resolution);
+            *code = plane_code(m, resolution);
         }
     }
     // Compaction: every lane is written, only survivors advance.

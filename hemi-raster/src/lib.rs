@@ -20,6 +20,6 @@ pub use disk::{BLOCK, DiskGrid};
 pub use kernel::Simd;
 pub use lut::PlaneLut;
 pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
-pub use method::HemiRaster;
+pub use method::{HemiRaster, UpdateProfile};
 pub use rasterize::{Rasterizer, TangentFrame};
 pub use transfer::{Integration, direct_irradiance, pixel_angle, sh_transfer};

@@ -17,41 +17,54 @@ use crate::mask::{Mask, MaskRow};
 const MAX_BYTES: usize = 1 << 30;
 
 /// Plane masks indexed by a cube-map parameterization of the plane normal
-/// m: the face is the axis a of m's largest component, and the cell is
-/// (⌊(u+1)/2·N⌋, ⌊(v+1)/2·N⌋) for u = m_{a+1}/|m_a|, v = m_{a+2}/|m_a|
-/// (axes cyclic). Each entry is the mask of the cell's centre normal.
+/// m (§3.1.1): the face is the axis a of m's largest component, and the cell
+/// is (⌊(u+1)/2·N⌋, ⌊(v+1)/2·N⌋) for u = m_{a+1}/|m_a|, v = m_{a+2}/|m_a|
+/// (axes cyclic). Each entry is the mask of its cell's centre normal.
 ///
-/// Only the three positive faces are stored: the opposite normal −m falls in
-/// the mirrored cell of the negative face, whose centre is exactly the
-/// negated centre, so its mask is the complement within the disk. The paper's
-/// 6×128×128 table of 32×32 masks (12 MB) is thus 6 MB here.
+/// # A quarter of the paper's table
+/// The paper stores all 6×N² cells (12 MB for 32×32 masks at N = 128). Two
+/// symmetries of the disk grid, both exact on its pixel centres, cut that to
+/// a quarter, so that at N = 128 the table is 3 MB rather than 12 and more of
+/// it stays in cache, where the look-ups spend most of the loop's time:
+/// - the opposite normal −m gives the complement within the disk, so
+///   normals with m_x < 0 are looked up as −m;
+/// - mirroring y (m_y → −m_y) mirrors the mask top to bottom, so normals with
+///   m_y < 0 are looked up mirrored. Masks store their rows folded (see
+///   [`Mask`]) so that this mirror is a swap of the two halves of storage:
+///   free in the per-receiver loop.
+///
+/// What is stored is thus every cell that a normal with m_x ≥ 0, m_y ≥ 0
+/// reaches: half of the +x face, half of the +y face, and two quadrants of
+/// the +z face (the −z face being the complement of the mirrored +z cell, as
+/// before). Every cell keeps its centre normal, so the answers are those of
+/// the full table up to which side of a cell boundary a normal lands on.
 #[derive(Clone, Debug)]
 pub struct PlaneLut<W: MaskRow> {
     resolution: usize,
     disk: Mask<W>,
-    /// The empty mask, to flip nothing by reference.
-    empty: Mask<W>,
     masks: Vec<Mask<W>>,
     build_time: Duration,
 }
 
 impl<W: MaskRow> PlaneLut<W> {
-    /// Builds the table with `resolution`² cells per cube face, in parallel.
-    /// Fails if `resolution` is zero or the table would exceed 1 GiB.
+    /// Builds the table with `resolution`² cells per cube face (an even
+    /// number), in parallel. Fails if `resolution` is zero or odd, or the
+    /// table would exceed 1 GiB.
     pub fn new(grid: &DiskGrid<W>, resolution: usize) -> Result<PlaneLut<W>> {
-        let bytes = 3usize
+        let cells = 3usize
             .checked_mul(resolution)
             .and_then(|n| n.checked_mul(resolution))
-            .and_then(|n| n.checked_mul(std::mem::size_of::<Mask<W>>()));
-        if resolution == 0 || bytes.is_none_or(|b| b > MAX_BYTES) {
-            return Err(Error::Stage {
-                method: "hemi-raster".into(),
-                what: format!(
-                    "plane LUT resolution {resolution} per cube face must be at least 1 and \
-                     give a table of at most 1 GiB for {0}×{0} masks",
+            .map(|n| n / 2);
+        let bytes = cells.and_then(|n| n.checked_mul(std::mem::size_of::<Mask<W>>()));
+        if resolution < 2 || resolution % 2 == 1 || bytes.is_none_or(|b| b > MAX_BYTES) {
+            return Err(Error::stage(
+                "hemi-raster",
+                format!(
+                    "plane LUT resolution {resolution} per cube face must be even, at least 2, \
+                     and give a table of at most 1 GiB for {0}×{0} masks",
                     W::RESOLUTION
                 ),
-            });
+            ));
         }
         let start = Instant::now();
         let pixels: Vec<(usize, usize, Vec3)> = grid
@@ -59,25 +72,20 @@ impl<W: MaskRow> PlaneLut<W> {
             .pixels()
             .map(|(r, c)| (r, c, grid.direction(r, c)))
             .collect();
-        let mut masks = vec![Mask::EMPTY; 3 * resolution * resolution];
-        masks
-            .par_chunks_mut(resolution)
-            .enumerate()
-            .for_each(|(face_row, row)| {
-                let (face, j) = (face_row / resolution, face_row % resolution);
-                for (i, mask) in row.iter_mut().enumerate() {
-                    let m = cell_normal(face, i, j, resolution);
-                    for &(r, c, d) in &pixels {
-                        if m.dot(d) > 0.0 {
-                            mask.set(r, c);
-                        }
-                    }
+        let n = resolution as u32;
+        let mut masks = vec![Mask::EMPTY; 3 * resolution * resolution / 2];
+        masks.par_iter_mut().enumerate().for_each(|(index, mask)| {
+            let (face, i, j) = stored_cell(index as u32, n);
+            let m = cell_normal(face as usize, i as usize, j as usize, resolution);
+            for &(r, c, d) in &pixels {
+                if m.dot(d) > 0.0 {
+                    mask.set(r, c);
                 }
-            });
+            }
+        });
         Ok(PlaneLut {
             resolution,
             disk: *grid.disk(),
-            empty: Mask::EMPTY,
             masks,
             build_time: start.elapsed(),
         })
@@ -102,85 +110,123 @@ impl<W: MaskRow> PlaneLut<W> {
     /// with normal `m` (any length, non-zero and finite), quantized to the
     /// table's cell. A zero or non-finite `m` gives the empty mask.
     pub fn lookup(&self, m: Vec3) -> Mask<W> {
-        match self.entry(m) {
-            None => Mask::EMPTY,
-            Some((mask, flip)) => {
-                let mut out = Mask::EMPTY;
-                out.or_and3_xor(
-                    [mask, &self.disk, &self.disk],
-                    [flip, &self.empty, &self.empty],
-                );
-                out
-            }
-        }
-    }
-
-    /// [`PlaneLut::lookup`] without copying: the stored mask `e` and a mask
-    /// `f` such that the answer is `e XOR f` (f is the disk for normals on
-    /// the negative faces, whose masks are complements, and empty
-    /// otherwise). `None` for a zero or non-finite `m`.
-    pub fn entry(&self, m: Vec3) -> Option<(&Mask<W>, &Mask<W>)> {
         if !m.is_finite() || m == Vec3::ZERO {
-            return None;
+            return Mask::EMPTY;
         }
-        let code = cell_code(m, self.resolution as u32);
-        let flip = if code & 1 == 1 {
-            &self.disk
+        let code = plane_code(m, self.resolution as u32);
+        let stored = self.mask((code >> 2) as usize);
+        let mirrored = if code & 2 != 0 {
+            stored.mirrored()
         } else {
-            &self.empty
+            *stored
         };
-        Some((self.mask((code >> 1) as usize), flip))
+        if code & 1 != 0 {
+            self.disk.and_not(&mirrored)
+        } else {
+            mirrored
+        }
     }
 
-    /// Stored mask `index` (the code of [`cell_code`] shifted right by one).
+    /// Stored mask `index` (a [`plane_code`] shifted right by two).
     #[inline(always)]
     pub(crate) fn mask(&self, index: usize) -> &Mask<W> {
         &self.masks[index]
     }
 
-    /// The disk pixels: the complement of a stored mask is taken within it.
+    /// The disk pixels.
     pub(crate) fn disk(&self) -> &Mask<W> {
         &self.disk
     }
 }
 
-/// The cell of plane normal `m` (non-zero and finite; anything else gives
-/// an arbitrary code) in a table of `resolution`² cells per face, encoded as
-/// `index << 1 | complement`: `index` is the stored mask of the cell (on a
-/// positive face) and `complement` says whether `m` lies on the negative face,
-/// whose mask is the complement of the mirrored positive cell's.
+/// Where the mask of plane normal `m` (non-zero and finite; anything else
+/// gives an arbitrary code) is in a table of `resolution`² cells per face:
+/// `index << 2 | mirror << 1 | complement`. The mask is the stored mask
+/// `index`, mirrored top to bottom if `mirror`, complemented within the disk
+/// if `complement` ([`PlaneLut`] docs).
 ///
-/// The face is the axis a of m's largest component, the cell
-/// (⌊(u+1)/2·N⌋, ⌊(v+1)/2·N⌋) for u = m_{a+1}/|m_a|, v = m_{a+2}/|m_a| (axes
-/// cyclic). Written without branches or indexing by a variable axis, so that
-/// the per-receiver loop computes 16 codes at once; [`PlaneLut::entry`] uses
-/// it too, so both paths pick the same cells bit for bit.
+/// Written without branches or indexing by a variable axis, so that the
+/// per-receiver loop computes 16 codes at once; [`PlaneLut::lookup`] uses it
+/// too, so both pick the same cells bit for bit.
 #[inline(always)]
-pub(crate) fn cell_code(m: Vec3, resolution: u32) -> u32 {
-    let abs = m.abs();
+pub(crate) fn plane_code(m: Vec3, resolution: u32) -> u32 {
+    // Into the stored quarter: m_x ≥ 0 by negation, then m_y ≥ 0 by mirror.
+    let negated = m.x < 0.0;
+    let q = if negated { -m } else { m };
+    let mirror = q.y < 0.0;
+    let p = Vec3::new(q.x, q.y.abs(), q.z);
+    let abs = p.abs();
     let x_major = (abs.x >= abs.y) & (abs.x >= abs.z);
     let y_major = !x_major & (abs.y >= abs.z);
     let (face, major, u, v) = if x_major {
-        (0, m.x, m.y, m.z)
+        (0, p.x, p.y, p.z)
     } else if y_major {
-        (1, m.y, m.z, m.x)
+        (1, p.y, p.z, p.x)
     } else {
-        (2, m.z, m.x, m.y)
+        (2, p.z, p.x, p.y)
     };
     let inv = 1.0 / major.abs();
-    let (n, last) = (resolution as f32, resolution as i32 - 1);
-    // Saturating casts: NaN and out-of-range lanes land in a valid cell.
-    let cell = |t: f32| ((((t * inv + 1.0) * 0.5 * n) as i32).clamp(0, last)) as u32;
-    let (i, j) = (cell(u), cell(v));
-    let negative = major < 0.0;
-    // −m is in cell (N−1−i, N−1−j) of the positive face.
-    let last = resolution - 1;
-    let (i, j) = if negative {
-        (last - i, last - j)
-    } else {
-        (i, j)
+    let (n, last) = (resolution as f32, (resolution - 1) as f32);
+    // Clamped in float (`max` maps NaN to 0), then truncated: the plain
+    // conversion vectorizes where Rust's saturating `as` does not.
+    let cell = |t: f32| {
+        let x = ((t * inv + 1.0) * 0.5 * n).max(0.0).min(last);
+        // SAFETY: x is finite and in [0, resolution − 1].
+        unsafe { x.to_int_unchecked::<u32>() }
     };
-    (((face * resolution + j) * resolution + i) << 1) | u32::from(negative)
+    let (i, j) = (cell(u), cell(v));
+    // A normal on the −z face (the only negative face left) is the
+    // complement of the mirrored +z cell; its centre is the negated centre.
+    let below = major < 0.0;
+    let last = resolution - 1;
+    let (i, j) = if below { (last - i, last - j) } else { (i, j) };
+    let index = stored_index(face, i, j, resolution);
+    (index << 2) | (u32::from(mirror) << 1) | u32::from(negated ^ below)
+}
+
+/// The storage index of positive-face cell (`face`, i, j) that a normal in
+/// the stored quarter reaches: +x cells with i ≥ N/2, +y cells with j ≥ N/2,
+/// +z cells with i and j on the same side of N/2. Wrapping arithmetic keeps
+/// the (unused) codes of culled lanes from overflowing.
+#[inline(always)]
+fn stored_index(face: u32, i: u32, j: u32, n: u32) -> u32 {
+    let half = n / 2;
+    let x_face = (j * half).wrapping_add(i.wrapping_sub(half));
+    let y_face = (n * half)
+        .wrapping_add(j.wrapping_sub(half).wrapping_mul(n))
+        .wrapping_add(i);
+    // No `%`: integer division does not vectorize.
+    let quadrant = u32::from(i >= half);
+    let offset = quadrant * half;
+    let z_face = (2 * n * half + offset * half)
+        .wrapping_add(j.wrapping_sub(offset).wrapping_mul(half))
+        .wrapping_add(i.wrapping_sub(offset));
+    let index = if face == 0 {
+        x_face
+    } else if face == 1 {
+        y_face
+    } else {
+        z_face
+    };
+    index.min(3 * n * half - 1)
+}
+
+/// The cell (face, i, j) stored at `index`: the inverse of [`stored_index`].
+fn stored_cell(index: u32, n: u32) -> (u32, u32, u32) {
+    let half = n / 2;
+    match index / (n * half) {
+        0 => (0, half + index % half, index / half),
+        1 => {
+            let k = index - n * half;
+            (1, k % n, half + k / n)
+        }
+        _ => {
+            let k = index - 2 * n * half;
+            let offset = (k / (half * half)) * half;
+            let k = k % (half * half);
+            (2, offset + k % half, offset + k / half)
+        }
+    }
 }
 
 /// The unit normal at the centre of cell (i, j) of positive face `face`.
@@ -212,7 +258,7 @@ mod tests {
     fn lookups_match_exact_planes_up_to_quantization() {
         let grid = DiskGrid::<u32>::new();
         let lut = PlaneLut::new(&grid, 128).unwrap();
-        assert_eq!(lut.bytes(), 3 * 128 * 128 * 128);
+        assert_eq!(lut.bytes(), 3 * 128 * 128 / 2 * 128);
         // Axis-aligned normals sit on cell corners or centres: the horizon
         // plane (normal +z) holds the whole disk, −z none of it.
         assert_eq!(lut.lookup(Vec3::Z), *grid.disk());
@@ -236,10 +282,32 @@ mod tests {
         assert!(lut.lookup(Vec3::NAN).is_empty());
     }
 
+    /// Every stored cell has its own index, and the code of each stored
+    /// cell's centre normal (and of its mirror images) finds it.
+    #[test]
+    fn stored_cells_and_codes_agree() {
+        for n in [2u32, 8, 128] {
+            for index in 0..3 * n * n / 2 {
+                let (face, i, j) = stored_cell(index, n);
+                assert_eq!(stored_index(face, i, j, n), index, "n {n}");
+                let m = cell_normal(face as usize, i as usize, j as usize, n as usize);
+                assert_eq!(plane_code(m, n), index << 2);
+                let mirrored = Vec3::new(m.x, -m.y, m.z);
+                if m.y != 0.0 {
+                    assert_eq!(plane_code(mirrored, n), index << 2 | 2);
+                }
+                if m.x != 0.0 {
+                    assert_eq!(plane_code(-m, n), index << 2 | 1);
+                }
+            }
+        }
+    }
+
     #[test]
     fn bad_resolutions_are_errors() {
         let grid = DiskGrid::<u64>::new();
         assert!(PlaneLut::new(&grid, 0).is_err());
+        assert!(PlaneLut::new(&grid, 63).is_err());
         assert!(PlaneLut::new(&grid, 1 << 20).is_err());
     }
 }

@@ -103,15 +103,34 @@ impl<W: MaskRow> Mask<W> {
     /// Pixels per side.
     pub const RESOLUTION: usize = W::RESOLUTION;
 
-    /// The rows, row 0 first.
+    /// The rows in storage order: rows 0 to R/2 − 1, then R − 1 down to R/2
+    /// (see [`Mask::storage_row`]).
     pub fn rows(&self) -> &[W] {
         self.rows.as_ref()
     }
 
-    /// The rows as their fixed-size array (whose length the compiler sees).
+    /// Where row `row` is stored. Rows are folded, the bottom half stored in
+    /// reverse after the top half, so that mirroring a mask top to bottom
+    /// swaps the two halves of its storage: the plane table's y symmetry
+    /// ([`crate::PlaneLut`]) then costs the per-receiver loop nothing. The
+    /// map is its own inverse.
     #[inline(always)]
-    pub(crate) fn rows_array(&self) -> &W::Rows {
-        &self.rows
+    pub const fn storage_row(row: usize) -> usize {
+        let r = W::RESOLUTION;
+        if row < r / 2 {
+            row
+        } else {
+            3 * r / 2 - 1 - row
+        }
+    }
+
+    /// The mask mirrored top to bottom (row r ↔ row R − 1 − r).
+    pub fn mirrored(&self) -> Mask<W> {
+        let half = W::RESOLUTION / 2;
+        let mut out = *self;
+        let (top, bottom) = out.rows.as_mut().split_at_mut(half);
+        top.swap_with_slice(bottom);
+        out
     }
 
     /// The rows, mutable.
@@ -125,7 +144,7 @@ impl<W: MaskRow> Mask<W> {
     /// If `row` or `col` is not below the resolution.
     pub fn get(&self, row: usize, col: usize) -> bool {
         assert!(col < W::RESOLUTION, "column {col} out of range");
-        self.rows.as_ref()[row] & W::bit(col) != W::ZERO
+        self.rows.as_ref()[Self::storage_row(row)] & W::bit(col) != W::ZERO
     }
 
     /// Sets pixel (`row`, `col`).
@@ -134,7 +153,7 @@ impl<W: MaskRow> Mask<W> {
     /// If `row` or `col` is not below the resolution.
     pub fn set(&mut self, row: usize, col: usize) {
         assert!(col < W::RESOLUTION, "column {col} out of range");
-        let r = &mut self.rows.as_mut()[row];
+        let r = &mut self.rows.as_mut()[Self::storage_row(row)];
         *r = *r | W::bit(col);
     }
 
@@ -162,18 +181,6 @@ impl<W: MaskRow> Mask<W> {
         self.zip(other, |a, b| a & !b)
     }
 
-    /// `self |= (a₀ ^ f₀) & (a₁ ^ f₁) & (a₂ ^ f₂)`: one blocker triangle,
-    /// the AND of its three edge masks (each possibly complemented by XOR
-    /// with the disk, see [`crate::PlaneLut::entry`]), fused into the
-    /// visibility mask. A plain loop over fixed-size rows, which the compiler
-    /// vectorizes.
-    pub fn or_and3_xor(&mut self, a: [&Mask<W>; 3], f: [&Mask<W>; 3]) {
-        for (r, d) in self.rows.as_mut().iter_mut().enumerate() {
-            let e = |k: usize| a[k].rows.as_ref()[r] ^ f[k].rows.as_ref()[r];
-            *d = *d | (e(0) & e(1) & e(2));
-        }
-    }
-
     /// True when every pixel set in `other` is set in `self`.
     pub fn contains(&self, other: &Mask<W>) -> bool {
         self.rows()
@@ -184,8 +191,8 @@ impl<W: MaskRow> Mask<W> {
 
     /// The set pixels as (row, col), row by row.
     pub fn pixels(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
-        self.rows().iter().enumerate().flat_map(|(r, &row)| {
-            let mut bits = row;
+        (0..W::RESOLUTION).flat_map(|r| {
+            let mut bits = self.rows()[Self::storage_row(r)];
             std::iter::from_fn(move || {
                 (bits != W::ZERO).then(|| {
                     let c = bits.lowest() as usize;
@@ -199,9 +206,11 @@ impl<W: MaskRow> Mask<W> {
     /// Set pixels in the 4×4 block (`block_row`, `block_col`): the grey level
     /// of §3.2's downsampling, times 16.
     pub fn block_count(&self, block_row: usize, block_col: usize) -> u32 {
-        self.rows()[4 * block_row..4 * block_row + 4]
-            .iter()
-            .map(|&r| (r >> (4 * block_col as u32)).low_nibble().count_ones())
+        (4 * block_row..4 * block_row + 4)
+            .map(|r| {
+                let row = self.rows()[Self::storage_row(r)];
+                (row >> (4 * block_col as u32)).low_nibble().count_ones()
+            })
             .sum()
     }
 
@@ -245,22 +254,14 @@ mod tests {
         assert_eq!(a.or(&b).count(), 3);
         assert_eq!(a.and_not(&b).pixels().collect::<Vec<_>>(), vec![(1, 1)]);
         assert!(a.or(&b).contains(&a) && !a.contains(&b));
-        let mut fused = Mask16::EMPTY;
-        let none = Mask16::EMPTY;
-        fused.or_and3_xor([&a.or(&b), &a, &b], [&none, &none, &none]);
-        assert_eq!(fused, a.and(&b));
-        let mut full = Mask16::EMPTY;
+        let mut mirrored = Mask16::EMPTY;
+        mirrored.set(14, 1);
+        mirrored.set(10, 6);
+        assert_eq!(a.mirrored(), mirrored);
+        assert_eq!(a.mirrored().mirrored(), a);
         for r in 0..16 {
-            for c in 0..16 {
-                full.set(r, c);
-            }
+            assert_eq!(Mask16::storage_row(Mask16::storage_row(r)), r);
         }
-        let mut flipped = Mask16::EMPTY;
-        flipped.or_and3_xor([&a, &b, &full], [&full, &none, &full]);
-        // (!a) & b & !full = nothing; (!a) & b & full = b without a.
-        assert!(flipped.is_empty());
-        flipped.or_and3_xor([&a, &b, &full], [&full, &none, &none]);
-        assert_eq!(flipped, b.and_not(&a));
         assert_eq!(a.block_count(0, 0), 1);
         assert_eq!(a.block_count(1, 1), 1);
         assert_eq!(b.block_count(2, 2), 1);

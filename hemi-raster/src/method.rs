@@ -1,7 +1,7 @@
 //! [`HemiRaster`]: the method driven through the [`ShadowMethod`] stages.
 
 use std::f32::consts::FRAC_1_PI;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -52,6 +52,37 @@ struct Prepared {
     hierarchy: Option<TwoLevel>,
 }
 
+/// Where one [`HemiRaster::profile_update`] spent its time, on one thread:
+/// the split of Kautz et al.'s Table 2 ("transform includes backface culling
+/// and view transformation of blockers") and the counts behind its Table 1.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct UpdateProfile {
+    /// Receivers (vertices, all objects).
+    pub receivers: usize,
+    /// Blocker triangles considered, summed over receivers: divided by
+    /// `receivers`, Table 1's "Avg. #Tris".
+    pub candidates: u64,
+    /// Of those, the ones that survived culling and were rasterized.
+    pub survivors: u64,
+    /// Gathering the frame's blockers into the loop's arrays, and the rest
+    /// of the visibility stage outside the per-receiver loop ("Other").
+    pub gather: Duration,
+    /// Per receiver: blockers into its tangent frame, culling (horizon,
+    /// receiver, back faces, boxes below the horizon), plane cells.
+    pub transform: Duration,
+    /// Per receiver: plane-mask look-ups, ANDs and ORs.
+    pub rasterization: Duration,
+    /// Masks to transfer vectors (or, for direct integration, to irradiance).
+    pub integration: Duration,
+}
+
+impl UpdateProfile {
+    /// The whole update.
+    pub fn total(&self) -> Duration {
+        self.gather + self.transform + self.rasterization + self.integration
+    }
+}
+
 enum Lighting {
     Sh(ShRgb),
     /// Prefiltered to the mask's pixel size.
@@ -93,29 +124,56 @@ impl<W: MaskRow> Pipeline<W> {
         })
     }
 
-    fn rasterize(&mut self, blockers: &Blockers, hierarchy: Option<&TwoLevel>) {
+    /// Every receiver's mask, in parallel; or, with `profile`, on the
+    /// calling thread with the loop's phases timed.
+    fn rasterize(
+        &mut self,
+        blockers: &Blockers,
+        hierarchy: Option<&TwoLevel>,
+        profile: Option<&mut UpdateProfile>,
+    ) {
         let corners = match hierarchy {
             Some(h) => h.corners(blockers),
             None => Corners::new(blockers, &blockers.triangles, blockers.objects.clone()),
         };
         let (lut, simd) = (self.raster.lut(), self.simd);
-        self.masks = (0..blockers.vertex_count())
-            .into_par_iter()
-            .map_init(Scratch::default, |scratch, v| {
-                let candidates = match hierarchy {
-                    Some(h) => h.candidates(blockers, &corners, v),
-                    None => Candidates::All(&corners),
-                };
-                receiver_mask(
-                    simd,
-                    lut,
-                    blockers,
-                    &blockers.frame(v),
-                    &candidates,
-                    scratch,
-                )
-            })
-            .collect();
+        let candidates = |v: usize| match hierarchy {
+            Some(h) => h.candidates(blockers, &corners, v),
+            None => Candidates::All(&corners),
+        };
+        let mask = |scratch: &mut Scratch, v: usize| {
+            receiver_mask(
+                simd,
+                lut,
+                blockers,
+                &blockers.frame(v),
+                &candidates(v),
+                scratch,
+            )
+        };
+        let receivers = 0..blockers.vertex_count();
+        self.masks = match profile {
+            None => receivers
+                .into_par_iter()
+                .map_init(Scratch::default, mask)
+                .collect(),
+            Some(profile) => {
+                let mut scratch = Scratch::profiling();
+                let masks = receivers
+                    .clone()
+                    .map(|v| {
+                        profile.candidates += candidates(v).count() as u64;
+                        mask(&mut scratch, v)
+                    })
+                    .collect();
+                let phases = scratch.profile().unwrap_or_default();
+                profile.transform = phases.transform;
+                profile.rasterization = phases.rasterization;
+                profile.survivors = phases.survivors;
+                profile.receivers = receivers.len();
+                masks
+            }
+        };
     }
 
     fn transfer(&self, blockers: &Blockers, lambert: &Zonal, blocks: bool, out: &mut Vec<f32>) {
@@ -212,6 +270,66 @@ impl HemiRaster {
     fn global_vertex(&self, object: usize, vertex: usize) -> Option<usize> {
         let counts = &self.scene.as_ref()?.vertex_counts;
         (vertex < *counts.get(object)?).then(|| counts[..object].iter().sum::<usize>() + vertex)
+    }
+
+    /// Runs [`ShadowMethod::update`] on one thread with its stages timed:
+    /// the split of the paper's Table 2 and the blocker counts of its Table 1.
+    /// The masks and transfer vectors are those `update` computes; only the
+    /// time differs (one thread, plus two clock reads per receiver).
+    pub fn profile_update(&mut self, frame: &FrameGeometry) -> Result<UpdateProfile> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .map_err(|e| Error::stage(NAME, format!("no thread pool for profiling: {e}")))?;
+        let mut profile = UpdateProfile::default();
+        pool.install(|| self.update_frame(frame, Some(&mut profile)))?;
+        Ok(profile)
+    }
+
+    /// `update`, optionally profiled.
+    fn update_frame(
+        &mut self,
+        frame: &FrameGeometry,
+        mut profile: Option<&mut UpdateProfile>,
+    ) -> Result<()> {
+        let prepared = self
+            .scene
+            .as_ref()
+            .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
+        let counts: Vec<usize> = frame.objects.iter().map(|o| o.vertex_count()).collect();
+        if counts != prepared.vertex_counts {
+            return Err(Error::InvalidScene(format!(
+                "{NAME}: frame {} has vertex counts {counts:?} per object, the prepared scene {:?}",
+                frame.frame, prepared.vertex_counts
+            )));
+        }
+        let engine = self
+            .engine
+            .as_mut()
+            .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
+        let start = Instant::now();
+        let blockers = Blockers::new(frame, &prepared.cull);
+        let hierarchy = prepared.hierarchy.as_ref();
+        with_pipeline!(engine, p => p.rasterize(&blockers, hierarchy, profile.as_deref_mut()));
+        let visibility = start.elapsed();
+        let order = self.config.order;
+        match self.config.integration {
+            Integration::ShBlocks | Integration::ShPixels => {
+                let blocks = self.config.integration == Integration::ShBlocks;
+                let lambert = Zonal::lambert(order);
+                with_pipeline!(engine, p => p.transfer(&blockers, &lambert, blocks, &mut self.transfer));
+            }
+            Integration::Direct => self.transfer.clear(),
+        }
+        self.blockers = Some(blockers);
+        self.frame = Some(frame.clone());
+        self.integrate_direct();
+        if let Some(p) = profile {
+            p.integration = start.elapsed() - visibility;
+            // Gathering the frame's blockers and corner arrays, the rest.
+            p.gather = visibility.saturating_sub(p.transform + p.rasterization);
+        }
+        Ok(())
     }
 
     /// Direct integration: the per-vertex irradiance, once both the masks and
@@ -317,25 +435,7 @@ impl ShadowMethod for HemiRaster {
                 frame.frame, prepared.vertex_counts
             )));
         }
-        let engine = self
-            .engine
-            .as_mut()
-            .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
-        let blockers = Blockers::new(frame, &prepared.cull);
-        with_pipeline!(engine, p => p.rasterize(&blockers, prepared.hierarchy.as_ref()));
-        let order = self.config.order;
-        match self.config.integration {
-            Integration::ShBlocks | Integration::ShPixels => {
-                let blocks = self.config.integration == Integration::ShBlocks;
-                let lambert = Zonal::lambert(order);
-                with_pipeline!(engine, p => p.transfer(&blockers, &lambert, blocks, &mut self.transfer));
-            }
-            Integration::Direct => self.transfer.clear(),
-        }
-        self.blockers = Some(blockers);
-        self.frame = Some(frame.clone());
-        self.integrate_direct();
-        Ok(())
+        self.update_frame(frame, None)
     }
 
     /// Projects the environment to SH (or, for direct integration,

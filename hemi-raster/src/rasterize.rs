@@ -141,14 +141,9 @@ impl<W: MaskRow> Rasterizer<W> {
         if !kept {
             return false;
         }
-        match planes.map(|m| self.lut.entry(m)) {
-            [Some((ea, fa)), Some((eb, fb)), Some((ec, fc))] => {
-                mask.or_and3_xor([ea, eb, ec], [fa, fb, fc]);
-                true
-            }
-            // Unreachable for a finite non-degenerate triangle.
-            _ => false,
-        }
+        let [a, b, c] = planes.map(|m| self.lut.lookup(m));
+        *mask = mask.or(&a.and(&b).and(&c));
+        true
     }
 
     /// The visibility mask at `frame` of world-space `triangles`: a

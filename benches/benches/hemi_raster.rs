@@ -1,0 +1,155 @@
+//! Kautz, Lehtinen and Aila 2004's Tables 1 and 2 on this machine.
+//!
+//! - Table 1 (criterion, per scene): one animation frame of `hemi-raster`
+//!   (the frame's posed geometry, visibility, SH integration and shading),
+//!   cycling through the scene's frames, with the two-level hierarchy and
+//!   flat, on every SIMD path the CPU runs; and the skinning of the human
+//!   (glTF joints and morphs to posed vertices), which a renderer adds per
+//!   frame.
+//! - Table 2 (printed before the measurements): where one update's time goes
+//!   on one thread (transform, rasterization, integration, other) and the
+//!   average number of blocker triangles per vertex, from
+//!   [`HemiRaster::profile_update`].
+//!
+//! Run with `cargo bench -p benches --bench hemi_raster`. Timings on a
+//! software-only machine are CPU timings; nothing here uses the GPU.
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use harness::gltf::GltfAsset;
+use harness::scenes;
+use hemi_raster::{Config, HemiRaster, Hierarchy, Simd};
+use shadow_core::{Scene, ShadowMethod};
+
+/// The paper's three scene kinds that we have: cloth, a skinned character
+/// (its "Fight"), moving chess pieces.
+const SCENES: [&str; 3] = ["cloth", "human", "chess"];
+
+fn scenes() -> Vec<Scene> {
+    SCENES
+        .iter()
+        .filter(|name| scenes::SCENES.iter().any(|s| s.name == **name))
+        .map(|name| scenes::builtin(name).expect("built-in scene"))
+        .collect()
+}
+
+fn configs() -> Vec<(String, Config)> {
+    let mut out = Vec::new();
+    for simd in Simd::available().into_iter().rev() {
+        out.push((
+            format!("two-level/{simd:?}"),
+            Config {
+                simd,
+                ..Config::default()
+            },
+        ));
+    }
+    out.push((
+        "flat/Auto".to_string(),
+        Config {
+            hierarchy: Hierarchy::Flat,
+            ..Config::default()
+        },
+    ));
+    out
+}
+
+/// Table 2, printed: one profiled update per scene and hierarchy.
+fn print_split() {
+    println!(
+        "\nhemi-raster time split on one thread (Kautz et al. Table 2), {:?} path",
+        Simd::Auto.resolve().expect("a path")
+    );
+    println!(
+        "{:<8} {:<10} {:>6} {:>7} {:>10} {:>9} {:>9} {:>11} {:>7} {:>9}",
+        "scene",
+        "hierarchy",
+        "verts",
+        "tris",
+        "avg #tris",
+        "survive",
+        "transform",
+        "rasterize",
+        "integr.",
+        "other"
+    );
+    for scene in scenes() {
+        let frame = scene.frame_geometry(0).expect("frame 0");
+        for (label, hierarchy) in [
+            ("two-level", Hierarchy::default()),
+            ("flat", Hierarchy::Flat),
+        ] {
+            let mut method = HemiRaster::new(Config {
+                hierarchy,
+                ..Config::default()
+            });
+            method.prepare(&scene).expect("prepare");
+            method.update(&frame).expect("warm-up update");
+            let p = method.profile_update(&frame).expect("profiled update");
+            let total = p.total().as_secs_f64();
+            let share = |d: std::time::Duration| 100.0 * d.as_secs_f64() / total;
+            let per_vertex = |n: u64| n as f64 / p.receivers as f64;
+            println!(
+                "{:<8} {:<10} {:>6} {:>7} {:>10.1} {:>8.1}% {:>8.1}% {:>10.1}% {:>6.1}% {:>8.1}%   {:.1} ms, {:.2} ns per pair",
+                scene.name(),
+                label,
+                scene.vertex_count(),
+                scene.triangle_count(),
+                per_vertex(p.candidates),
+                100.0 * p.survivors as f64 / p.candidates as f64,
+                share(p.transform),
+                share(p.rasterization),
+                share(p.integration),
+                share(p.gather),
+                total * 1e3,
+                (p.transform + p.rasterization).as_secs_f64() * 1e9 / p.candidates as f64,
+            );
+        }
+    }
+    println!();
+}
+
+fn table1(c: &mut Criterion) {
+    print_split();
+    for scene in scenes() {
+        let frames: Vec<_> = (0..scene.frames().len())
+            .map(|i| scene.frame_geometry(i).expect("frame"))
+            .collect();
+        let mut group = c.benchmark_group(format!("hemi-raster/{}", scene.name()));
+        group.sample_size(10);
+        for (label, config) in configs() {
+            let mut method = HemiRaster::new(config);
+            method.prepare(&scene).expect("prepare");
+            method
+                .relight(&scenes::environment("uniform").expect("uniform"))
+                .expect("relight");
+            let mut next = 0;
+            group.bench_function(BenchmarkId::from_parameter(label), |b| {
+                b.iter(|| {
+                    let i = next % frames.len();
+                    next += 1;
+                    let geometry = scene.frame_geometry(i).expect("frame");
+                    method.update(&geometry).expect("update");
+                    method.shade(scene.camera().eye).expect("shade")
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
+/// Posing the skinned human: what a renderer adds to every frame.
+fn skinning(c: &mut Criterion) {
+    let path = scenes::assets_dir().join("meshes/BCN_Epileptic_skinned_animated.glb");
+    let asset = GltfAsset::load(&path).expect("the shipped human");
+    let duration = asset.duration();
+    let mut t = 0.0;
+    c.bench_function("hemi-raster/human/skinning", |b| {
+        b.iter(|| {
+            t = (t + duration / 7.0) % duration.max(f32::MIN_POSITIVE);
+            asset.pose_at(t).expect("pose")
+        })
+    });
+}
+
+criterion_group!(benches, table1, skinning);
+criterion_main!(benches);
