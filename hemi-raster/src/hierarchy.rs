@@ -24,14 +24,19 @@
 //!
 //! Coarse triangles through the receiver subtend no solid angle and are
 //! skipped, and so are the receiver's own object's coarse triangles that it
-//! sees from behind, closer (in the rest pose) than the triangle's own
-//! radius: a coarse triangle is a chord of the fine surface, and over a
-//! concave receiver it passes just above it, back side down, blocking half
-//! its hemisphere. Closed meshes cull those as back faces anyway; on the
-//! open wavy cloth of the `frame_timing` example (rings only), keeping them
-//! darkened the mean radiance from 0.651 (flat) to 0.405, skipping them gave
-//! 0.654. A fold of the same object seen from behind farther away than the
-//! coarse triangle's size is kept.
+//! sees from behind with their centroid closer than twice their radius
+//! ([`crate::rasterize`]'s `is_near_chord`, tested per frame in the
+//! per-receiver loop, so that it follows deformation): a coarse triangle is
+//! a chord of the fine surface, and over a concave receiver it passes just
+//! above it, back side down, blocking half its hemisphere. Closed meshes
+//! cull those as back faces anyway; on the open wavy cloth of the
+//! `frame_timing` example (rings only), keeping them darkened the mean
+//! radiance from 0.651 (flat) to 0.405, skipping them gave 0.654. A fold of
+//! the same object seen from behind farther away than the coarse triangle's
+//! size is kept. (The rule was first tested once in the rest pose; on the
+//! harness's deforming `cloth`, whose folds form after the rest pose, that
+//! left chords over the new folds and 18% transfer error against 3.8%
+//! flat.)
 //!
 //! On the skinned human of the harness (5,126 → 512 triangles, two-ring),
 //! the rings alone gave about 28% error against the reference (11.1% flat):
@@ -47,8 +52,9 @@
 //! touch the near rings, and 0.038 when also skipping those facing the
 //! receiver closer than the near rings reach.
 //!
-//! The near and skip lists are computed once, in the rest pose, and kept
-//! under deformation.
+//! The near lists are computed once, in the rest pose, and kept under
+//! deformation: rings are topological; spatial neighbours that a
+//! deformation brings close are seen through the coarse mesh.
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -63,7 +69,7 @@ use crate::kernel::{Candidates, Corners};
 use crate::rasterize::Blockers;
 
 /// The static part of the hierarchy of a scene: coarse meshes and, per
-/// receiver, its near triangles and the coarse triangles it skips. Vertex and
+/// receiver, its near triangles. Vertex and
 /// triangle indices are global (all objects one after another, as in
 /// [`Blockers`]).
 #[derive(Clone, Debug)]
@@ -78,18 +84,14 @@ pub(crate) struct TwoLevel {
     /// Per global vertex (CSR): its near full-resolution triangles.
     near_offsets: Vec<u32>,
     near: Vec<u32>,
-    /// Per global vertex (CSR, each list sorted): the coarse triangles it
-    /// skips (module docs).
-    skip_offsets: Vec<u32>,
-    skip: Vec<u32>,
 }
 
 /// One object's share of the hierarchy, in its own indices.
 struct ObjectLevels {
     /// Coarse triangles over the object's (welded) vertices.
     coarse: Vec<[u32; 3]>,
-    /// Per vertex: its near triangles and the coarse triangles it skips.
-    near: Vec<(Vec<u32>, Vec<u32>)>,
+    /// Per vertex: its near triangles.
+    near: Vec<Vec<u32>>,
 }
 
 impl TwoLevel {
@@ -108,8 +110,6 @@ impl TwoLevel {
             vertex_object: Vec::new(),
             near_offsets: vec![0],
             near: Vec::new(),
-            skip_offsets: vec![0],
-            skip: Vec::new(),
         };
         let (mut vertex_base, mut triangle_base) = (0u32, 0u32);
         for (o, object) in scene.objects().iter().enumerate() {
@@ -119,11 +119,9 @@ impl TwoLevel {
             h.coarse_triangles
                 .extend(levels.coarse.iter().map(|t| t.map(|i| i + vertex_base)));
             h.coarse_objects.push(coarse_base..h.coarse_triangles.len());
-            for (near, skip) in levels.near {
+            for near in levels.near {
                 h.near.extend(near.iter().map(|t| t + triangle_base));
                 h.near_offsets.push(h.near.len() as u32);
-                h.skip.extend(skip.iter().map(|&c| c + coarse_base as u32));
-                h.skip_offsets.push(h.skip.len() as u32);
                 h.vertex_object.push(o as u32);
             }
             vertex_base += mesh.vertex_count() as u32;
@@ -149,20 +147,14 @@ impl TwoLevel {
 
     /// What global vertex `v` rasterizes: its near triangles at full
     /// resolution and every coarse triangle (`coarse`, from
-    /// [`TwoLevel::corners`]) but those it skips. Triangles through `v`
-    /// itself subtend no solid angle and are culled by the loop.
-    pub(crate) fn candidates<'a>(
-        &'a self,
-        blockers: &Blockers,
-        coarse: &'a Corners,
-        v: usize,
-    ) -> Candidates<'a> {
-        let csr = |offsets: &[u32], v: usize| offsets[v] as usize..offsets[v + 1] as usize;
+    /// [`TwoLevel::corners`]) but its own object's near chords. Triangles
+    /// through `v` itself subtend no solid angle and are culled by the loop.
+    pub(crate) fn candidates<'a>(&'a self, coarse: &'a Corners, v: usize) -> Candidates<'a> {
+        let near = self.near_offsets[v] as usize..self.near_offsets[v + 1] as usize;
         Candidates::TwoLevel {
             coarse,
-            skip: &self.skip[csr(&self.skip_offsets, v)],
-            near: &self.near[csr(&self.near_offsets, v)],
-            near_cull: blockers.objects[self.vertex_object[v] as usize].1,
+            own: self.vertex_object[v] as usize,
+            near: &self.near[near],
         }
     }
 }
@@ -179,7 +171,7 @@ impl ObjectLevels {
         let target = (triangles.len() / divisor as usize).max(min_triangles as usize);
         let whole = || ObjectLevels {
             coarse: triangles.to_vec(),
-            near: vec![(Vec::new(), Vec::new()); mesh.vertex_count()],
+            near: vec![Vec::new(); mesh.vertex_count()],
         };
         if target >= triangles.len() {
             return Ok(whole());
@@ -225,15 +217,11 @@ impl ObjectLevels {
             return Ok(whole());
         }
         let adjacency = Adjacency::new(mesh.vertex_count(), &welded);
-        let chords: Vec<([Vec3; 3], Vec3, f32)> = coarse
+        let mean_radius = coarse
             .iter()
-            .map(|t| {
-                let corners = t.map(|i| positions[i as usize]);
-                let (centre, radius) = bounding_sphere(corners);
-                (corners, centre, radius)
-            })
-            .collect();
-        let mean_radius = chords.iter().map(|c| c.2).sum::<f32>() / chords.len() as f32;
+            .map(|t| bounding_sphere(t.map(|i| positions[i as usize])).1)
+            .sum::<f32>()
+            / coarse.len() as f32;
         let spatial = f32::from(reach) * mean_radius;
         // Fine triangles sorted by the x of their centre, so that those
         // within `spatial` of a vertex lie in a window found by bisection.
@@ -273,18 +261,7 @@ impl ObjectLevels {
                 }
                 near.sort_unstable();
                 near.dedup();
-                let skip = chords
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, ([a, b, c], centre, radius))| {
-                        let reach = *radius;
-                        p.distance(*centre) - radius < reach
-                            && (*b - *a).cross(*c - *a).dot(p - *a) < 0.0
-                            && closest_point(p, *a, *b, *c).distance(p) < reach
-                    })
-                    .map(|(c, _)| c as u32)
-                    .collect();
-                (near, skip)
+                near
             })
             .collect();
         Ok(ObjectLevels { coarse, near })

@@ -41,7 +41,7 @@ use shadow_core::{Error, Result};
 
 use crate::lut::{PlaneLut, plane_code};
 use crate::mask::{Mask, MaskRow};
-use crate::rasterize::{Blockers, TangentFrame, edge_planes};
+use crate::rasterize::{Blockers, TangentFrame, edge_planes, is_near_chord};
 
 /// Triangles per setup chunk, and per cluster.
 pub(crate) const LANES: usize = 16;
@@ -117,16 +117,13 @@ pub(crate) struct Corners {
     boxes: Vec<(Vec3, Vec3)>,
     /// Real (unpadded) triangles.
     triangles: usize,
-    /// Per object: its chunks, the number of its first triangle in the
-    /// numbering the corners were built from, and whether its back faces
-    /// are culled.
+    /// Per object: its chunks and whether its back faces are culled.
     objects: Vec<Group>,
 }
 
 #[derive(Clone, Debug)]
 struct Group {
     chunks: Range<usize>,
-    first_triangle: usize,
     cull: bool,
 }
 
@@ -140,13 +137,7 @@ impl Corners {
     ) -> Corners {
         let mut out = Corners::default();
         for (range, cull) in groups {
-            out.push(
-                blockers,
-                triangles[range.clone()].iter().copied(),
-                range.start,
-                cull,
-                true,
-            );
+            out.push(blockers, triangles[range].iter().copied(), cull, true);
         }
         out
     }
@@ -158,7 +149,6 @@ impl Corners {
         &mut self,
         blockers: &Blockers,
         triangles: impl ExactSizeIterator<Item = [u32; 3]>,
-        first_triangle: usize,
         cull: bool,
         boxed: bool,
     ) {
@@ -200,20 +190,8 @@ impl Corners {
         }
         self.objects.push(Group {
             chunks: first_chunk..self.boxes.len(),
-            first_triangle,
             cull,
         });
-    }
-
-    /// The slot of triangle `t` in the numbering the corners were built
-    /// from.
-    fn slot(&self, t: usize) -> usize {
-        let o = self
-            .objects
-            .partition_point(|g| g.first_triangle <= t)
-            .saturating_sub(1);
-        let g = &self.objects[o];
-        g.chunks.start * LANES + (t - g.first_triangle)
     }
 
     fn slots(&self) -> usize {
@@ -243,14 +221,13 @@ impl Corners {
 pub(crate) enum Candidates<'a> {
     /// Every triangle of the frame.
     All(&'a Corners),
-    /// §3.2's two levels: the coarse triangles minus `skip` (sorted, in the
-    /// numbering `coarse` was built from), and the near fine triangles
-    /// (indices into [`Blockers`]' triangles) with their object's culling.
+    /// §3.2's two levels: the coarse triangles of every object but the
+    /// receiver's own (`own`) near chords ([`is_near_chord`]), and the near
+    /// fine triangles (indices into [`Blockers`]' triangles).
     TwoLevel {
         coarse: &'a Corners,
-        skip: &'a [u32],
+        own: usize,
         near: &'a [u32],
-        near_cull: bool,
     },
 }
 
@@ -260,9 +237,7 @@ impl Candidates<'_> {
     pub(crate) fn count(&self) -> usize {
         match self {
             Candidates::All(corners) => corners.triangles,
-            Candidates::TwoLevel {
-                coarse, skip, near, ..
-            } => coarse.triangles - skip.len() + near.len(),
+            Candidates::TwoLevel { coarse, near, .. } => coarse.triangles + near.len(),
         }
     }
 }
@@ -273,8 +248,6 @@ impl Candidates<'_> {
 pub(crate) struct Scratch {
     /// Three plane-cell codes per surviving triangle.
     survivors: Vec<u32>,
-    /// Skipped coarse slots, one bit each.
-    skip: Vec<u64>,
     /// The current receiver's near triangles, gathered.
     near: Corners,
     /// Time and counts of the two phases, when profiling.
@@ -400,56 +373,49 @@ impl<W: MaskRow> Job<'_, W> {
         let start = scratch.profile.is_some().then(Instant::now);
         let Scratch {
             survivors,
-            skip,
             near,
             profile,
         } = scratch;
-        let mut count = 0;
-        match *self.candidates {
-            Candidates::All(corners) => {
-                fit(survivors, corners.slots());
-                for g in &corners.objects {
-                    for chunk in g.chunks.clone() {
-                        setup(
-                            corners, chunk, g.cull, 0, &frame, resolution, survivors, &mut count,
-                        );
-                    }
-                }
-            }
+        let slots = match *self.candidates {
+            Candidates::All(corners) => corners.slots(),
             Candidates::TwoLevel {
                 coarse,
-                skip: skipped,
+                own,
                 near: near_triangles,
-                near_cull,
             } => {
                 near.clear();
                 let triangles = &self.blockers.triangles;
                 let gathered = near_triangles.iter().map(|&t| triangles[t as usize]);
                 // Near triangles are near: their boxes would not cull.
-                near.push(self.blockers, gathered, 0, near_cull, false);
-                fit(survivors, coarse.slots() + near.slots());
-                skip.clear();
-                skip.resize(coarse.slots().div_ceil(64), 0);
-                for &c in skipped {
-                    let slot = coarse.slot(c as usize);
-                    skip[slot / 64] |= 1 << (slot % 64);
+                let cull = self.blockers.objects[own].1;
+                near.push(self.blockers, gathered, cull, false);
+                coarse.slots() + near.slots()
+            }
+        };
+        fit(survivors, slots);
+        let mut count = 0;
+        let mut run = |corners: &Corners, chunk: usize, cull: bool, chords: bool| {
+            setup(
+                corners, chunk, cull, chords, &frame, resolution, survivors, &mut count,
+            )
+        };
+        match *self.candidates {
+            Candidates::All(corners) => {
+                for g in &corners.objects {
+                    g.chunks
+                        .clone()
+                        .for_each(|chunk| run(corners, chunk, g.cull, false));
                 }
-                for g in &coarse.objects {
-                    for chunk in g.chunks.clone() {
-                        // LANES divides 64: a chunk's bits share a word.
-                        let bit = chunk * LANES;
-                        let skipped = (skip[bit / 64] >> (bit % 64)) as u32 & CHUNK_BITS;
-                        setup(
-                            coarse, chunk, g.cull, skipped, &frame, resolution, survivors,
-                            &mut count,
-                        );
-                    }
+            }
+            Candidates::TwoLevel { coarse, own, .. } => {
+                for (o, g) in coarse.objects.iter().enumerate() {
+                    g.chunks
+                        .clone()
+                        .for_each(|chunk| run(coarse, chunk, g.cull, o == own));
                 }
-                for chunk in 0..near.boxes.len() {
-                    setup(
-                        near, chunk, near_cull, 0, &frame, resolution, survivors, &mut count,
-                    );
-                }
+                let near: &Corners = near;
+                let cull = near.objects[0].cull;
+                (0..near.boxes.len()).for_each(|chunk| run(near, chunk, cull, false));
             }
         }
         let setup_end = start.map(|_| Instant::now());
@@ -505,9 +471,6 @@ impl<W: MaskRow> Job<'_, W> {
     }
 }
 
-/// Every lane of a chunk.
-const CHUNK_BITS: u32 = (1 << LANES) - 1;
-
 /// Makes room for three codes per slot plus one chunk of overrun (the
 /// compaction writes every lane and advances only past survivors).
 fn fit(survivors: &mut Vec<u32>, slots: usize) {
@@ -517,8 +480,9 @@ fn fit(survivors: &mut Vec<u32>, slots: usize) {
     }
 }
 
-/// Phase 1 on one chunk: appends the plane-cell codes of its surviving
-/// triangles (not in `skipped`, a bit per lane) at `survivors[*count..]`.
+/// Phase 1 on one chunk: appends the plane codes of its surviving triangles
+/// at `survivors[*count..]`; with `chords`, near chords
+/// ([`is_near_chord`]) are culled too.
 /// Straight-line code over fixed-size arrays: the compiler turns the first
 /// loop into SIMD instructions, 16 triangles per pass.
 #[allow(clippy::too_many_arguments)]
@@ -527,7 +491,7 @@ fn setup(
     corners: &Corners,
     chunk: usize,
     cull: bool,
-    skipped: u32,
+    chords: bool,
     frame: &Frame,
     resolution: u32,
     survivors: &mut [u32],
@@ -554,13 +518,15 @@ fn setup(
     for l in 0..LANES {
         let corner =
             |k: usize| Vec3::new(local[3 * k][l], local[3 * k + 1][l], local[3 * k + 2][l]);
-        let (kept, m) = edge_planes([corner(0), corner(1), corner(2)], cull);
-        for (e, m) in m.iter().enumerate() {
-            planes[3 * e][l] = m.x;
-            planes[3 * e + 1][l] = m.y;
-            planes[3 * e + 2][l] = m.z;
+        let corners = [corner(0), corner(1), corner(2)];
+        let e = edge_planes(corners, cull);
+        for (k, m) in e.normals.iter().enumerate() {
+            planes[3 * k][l] = m.x;
+            planes[3 * k + 1][l] = m.y;
+            planes[3 * k + 2][l] = m.z;
         }
-        keep[l] = u32::from(kept) & !(skipped >> l) & 1;
+        let chord = chords & is_near_chord(corners, e.behind);
+        keep[l] = u32::from(e.kept & !chord);
     }
     let mut codes = [[0u32; LANES]; 3];
     for (e, codes) in codes.iter_mut().enumerate() {
@@ -641,6 +607,17 @@ mod tests {
         let raster = Rasterizer::<W>::new(lut_resolution).unwrap();
         let all = Corners::new(&blockers, &blockers.triangles, blockers.objects.clone());
         let world = |t: [u32; 3]| t.map(|i| blockers.position(i as usize));
+        let object_of_vertex = |v: usize| {
+            let mut first = 0;
+            geometry
+                .objects
+                .iter()
+                .position(|o| {
+                    first += o.vertex_count();
+                    v < first
+                })
+                .unwrap()
+        };
         let object_of = |t: usize| {
             blockers
                 .objects
@@ -662,37 +639,43 @@ mod tests {
                     .map(|(t, &tri)| (world(tri), cull[object_of(t)])),
             );
             blocked += usize::from(!truth.is_empty());
-            // A two-level candidate list: every third triangle as "coarse"
-            // (some skipped), every fifth as "near".
-            let coarse_triangles: Vec<[u32; 3]> =
-                blockers.triangles.iter().copied().step_by(3).collect();
-            let coarse = Corners::new(
-                &blockers,
-                &coarse_triangles,
-                [(0..coarse_triangles.len(), true)],
-            );
-            let skip: Vec<u32> = (0..coarse_triangles.len() as u32)
-                .filter(|c| (c + v as u32).is_multiple_of(11))
-                .collect();
+            // A two-level candidate list: every third triangle of each
+            // object as "coarse", every fifth as "near".
+            let mut coarse_triangles = Vec::new();
+            let mut groups = Vec::new();
+            for (range, cull) in &blockers.objects {
+                let start = coarse_triangles.len();
+                coarse_triangles.extend(blockers.triangles[range.clone()].iter().step_by(3));
+                groups.push((start..coarse_triangles.len(), *cull));
+            }
+            let coarse = Corners::new(&blockers, &coarse_triangles, groups.clone());
+            let own = object_of_vertex(v);
             let near: Vec<u32> = (0..blockers.triangles.len() as u32).step_by(5).collect();
+            let local = |t: [u32; 3]| world(t).map(|p| frame.to_local(p));
             let two_truth = reference(
                 &raster,
                 &frame,
-                coarse_triangles
+                groups
                     .iter()
                     .enumerate()
-                    .filter(|(c, _)| !skip.contains(&(*c as u32)))
-                    .map(|(_, &t)| (world(t), true))
+                    .flat_map(|(o, (range, cull))| {
+                        coarse_triangles[range.clone()]
+                            .iter()
+                            .filter_map(move |&t| {
+                                let chord = o == own
+                                    && is_near_chord(local(t), edge_planes(local(t), *cull).behind);
+                                (!chord).then_some((world(t), *cull))
+                            })
+                    })
                     .chain(
                         near.iter()
-                            .map(|&t| (world(blockers.triangles[t as usize]), false)),
+                            .map(|&t| (world(blockers.triangles[t as usize]), cull[own])),
                     ),
             );
             let two_level = Candidates::TwoLevel {
                 coarse: &coarse,
-                skip: &skip,
+                own,
                 near: &near,
-                near_cull: false,
             };
             for simd in Simd::available() {
                 let got = receiver_mask(

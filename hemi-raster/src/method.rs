@@ -138,7 +138,7 @@ impl<W: MaskRow> Pipeline<W> {
         };
         let (lut, simd) = (self.raster.lut(), self.simd);
         let candidates = |v: usize| match hierarchy {
-            Some(h) => h.candidates(blockers, &corners, v),
+            Some(h) => h.candidates(&corners, v),
             None => Candidates::All(&corners),
         };
         let mask = |scratch: &mut Scratch, v: usize| {

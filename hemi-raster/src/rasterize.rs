@@ -49,14 +49,24 @@ use crate::mask::{Mask, MaskRow};
 /// in a plane through the receiver and subtend no solid angle.
 const DEGENERATE: f32 = 1e-6;
 
-/// Whether triangle (a, b, c), in tangent coordinates, survives culling
-/// (module docs: below the horizon, through the receiver, back-facing while
-/// `cull_back_faces`), and its three edge-plane normals oriented so that the
-/// triangle's cone is on their positive sides. Branch-free, so that the
-/// per-receiver loop evaluates it 16 triangles at a time; the normals are
-/// meaningless when the triangle is culled.
+/// What culling decides about triangle (a, b, c) in tangent coordinates,
+/// and its three edge-plane normals oriented so that the triangle's cone is
+/// on their positive sides (meaningless when the triangle is culled).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct EdgePlanes {
+    /// Survives culling (module docs: below the horizon, through the
+    /// receiver, back-facing while culling back faces).
+    pub(crate) kept: bool,
+    /// The receiver is behind the triangle's plane (det > 0).
+    pub(crate) behind: bool,
+    pub(crate) normals: [Vec3; 3],
+}
+
+/// Culls triangle (a, b, c), given in tangent coordinates, and computes its
+/// edge planes. Branch-free, so that the per-receiver loop evaluates it 16
+/// triangles at a time.
 #[inline(always)]
-pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> (bool, [Vec3; 3]) {
+pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> EdgePlanes {
     // Bitwise `|`/`&`: no branches in the vectorized loop.
     let above = (a.z > 0.0) | (b.z > 0.0) | (c.z > 0.0);
     let (ab, bc, ca) = (a.cross(b), b.cross(c), c.cross(a));
@@ -64,9 +74,29 @@ pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> (bool,
     let scale = (a.length_squared() * b.length_squared() * c.length_squared()).sqrt();
     // False for NaN too.
     let spans_a_cone = det.abs() > DEGENERATE * scale;
-    let kept = above & spans_a_cone & !(cull_back_faces & (det > 0.0));
+    let behind = det > 0.0;
     let s = if det < 0.0 { -1.0 } else { 1.0 };
-    (kept, [s * ab, s * bc, s * ca])
+    EdgePlanes {
+        kept: above & spans_a_cone & !(cull_back_faces & behind),
+        behind,
+        normals: [s * ab, s * bc, s * ca],
+    }
+}
+
+/// Whether a coarse triangle of the receiver's own object, seen from behind
+/// (`behind`), passes within its own size of the receiver: the chord of a
+/// fold that the fine surface, not the coarse one, bends around (see
+/// [`crate::Hierarchy::TwoLevel`] and the `hierarchy` module docs). Tested
+/// per frame, so it follows deformation: the centroid of (a, b, c), in the
+/// receiver's tangent frame, is closer than twice the triangle's radius.
+#[inline(always)]
+pub(crate) fn is_near_chord([a, b, c]: [Vec3; 3], behind: bool) -> bool {
+    let centroid = (a + b + c) * (1.0 / 3.0);
+    let radius2 = (a - centroid)
+        .length_squared()
+        .max((b - centroid).length_squared())
+        .max((c - centroid).length_squared());
+    behind & (centroid.length_squared() < 4.0 * radius2)
 }
 
 /// A receiver's tangent frame: origin at the vertex, z along its normal.
@@ -137,11 +167,11 @@ impl<W: MaskRow> Rasterizer<W> {
     /// `cull_back_faces`. The reference the fast per-receiver loop is tested
     /// against.
     pub fn draw(&self, triangle: [Vec3; 3], cull_back_faces: bool, mask: &mut Mask<W>) -> bool {
-        let (kept, planes) = edge_planes(triangle, cull_back_faces);
-        if !kept {
+        let planes = edge_planes(triangle, cull_back_faces);
+        if !planes.kept {
             return false;
         }
-        let [a, b, c] = planes.map(|m| self.lut.lookup(m));
+        let [a, b, c] = planes.normals.map(|m| self.lut.lookup(m));
         *mask = mask.or(&a.and(&b).and(&c));
         true
     }
