@@ -81,7 +81,8 @@ pub(crate) struct TwoLevel {
     coarse_objects: Vec<Range<usize>>,
     /// Per global vertex: its object.
     vertex_object: Vec<u32>,
-    /// Per global vertex (CSR): its near full-resolution triangles.
+    /// Per global vertex (CSR): its near full-resolution triangles, as slots
+    /// of the frame's fine [`Corners`].
     near_offsets: Vec<u32>,
     near: Vec<u32>,
 }
@@ -111,7 +112,9 @@ impl TwoLevel {
             near_offsets: vec![0],
             near: Vec::new(),
         };
-        let (mut vertex_base, mut triangle_base) = (0u32, 0u32);
+        let slot_bases =
+            Corners::slot_bases(scene.objects().iter().map(|o| o.mesh.triangle_count()));
+        let mut vertex_base = 0u32;
         for (o, object) in scene.objects().iter().enumerate() {
             let mesh = &object.mesh;
             let levels = ObjectLevels::new(mesh, divisor, min_triangles, rings, reach)?;
@@ -120,12 +123,11 @@ impl TwoLevel {
                 .extend(levels.coarse.iter().map(|t| t.map(|i| i + vertex_base)));
             h.coarse_objects.push(coarse_base..h.coarse_triangles.len());
             for near in levels.near {
-                h.near.extend(near.iter().map(|t| t + triangle_base));
+                h.near.extend(near.iter().map(|t| t + slot_bases[o]));
                 h.near_offsets.push(h.near.len() as u32);
                 h.vertex_object.push(o as u32);
             }
             vertex_base += mesh.vertex_count() as u32;
-            triangle_base += mesh.triangle_count() as u32;
         }
         Ok(h)
     }
@@ -146,13 +148,20 @@ impl TwoLevel {
     }
 
     /// What global vertex `v` rasterizes: its near triangles at full
-    /// resolution and every coarse triangle (`coarse`, from
-    /// [`TwoLevel::corners`]) but its own object's near chords. Triangles
-    /// through `v` itself subtend no solid angle and are culled by the loop.
-    pub(crate) fn candidates<'a>(&'a self, coarse: &'a Corners, v: usize) -> Candidates<'a> {
+    /// resolution (from `fine`, every triangle of the frame) and every coarse
+    /// triangle (`coarse`, from [`TwoLevel::corners`]) but its own object's
+    /// near chords. Triangles through `v` itself subtend no solid angle and
+    /// are culled by the loop.
+    pub(crate) fn candidates<'a>(
+        &'a self,
+        coarse: &'a Corners,
+        fine: &'a Corners,
+        v: usize,
+    ) -> Candidates<'a> {
         let near = self.near_offsets[v] as usize..self.near_offsets[v + 1] as usize;
         Candidates::TwoLevel {
             coarse,
+            fine,
             own: self.vertex_object[v] as usize,
             near: &self.near[near],
         }

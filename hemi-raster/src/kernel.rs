@@ -137,21 +137,14 @@ impl Corners {
     ) -> Corners {
         let mut out = Corners::default();
         for (range, cull) in groups {
-            out.push(blockers, triangles[range].iter().copied(), cull, true);
+            out.push(blockers, &triangles[range], cull);
         }
         out
     }
 
     /// Appends one object's `triangles`, padded to whole chunks, and the
-    /// chunks' boxes (or, unless `boxed`, boxes that are never culled).
-    /// Allocation-free once the columns have grown.
-    fn push(
-        &mut self,
-        blockers: &Blockers,
-        triangles: impl ExactSizeIterator<Item = [u32; 3]>,
-        cull: bool,
-        boxed: bool,
-    ) {
+    /// chunks' boxes.
+    fn push(&mut self, blockers: &Blockers, triangles: &[[u32; 3]], cull: bool) {
         let first_chunk = self.boxes.len();
         let start = first_chunk * LANES;
         self.triangles += triangles.len();
@@ -167,12 +160,7 @@ impl Corners {
                 }
             }
         }
-        if !boxed {
-            // Never below any horizon.
-            let everywhere = (Vec3::ZERO, Vec3::INFINITY);
-            self.boxes.resize(padded / LANES, everywhere);
-        }
-        for chunk in (first_chunk..padded / LANES).filter(|_| boxed) {
+        for chunk in first_chunk..padded / LANES {
             let lanes = chunk * LANES..(chunk + 1) * LANES;
             // `f32::min`/`max` skip the NaN padding.
             let extent = |axis: usize| {
@@ -194,15 +182,44 @@ impl Corners {
         });
     }
 
-    fn slots(&self) -> usize {
-        self.boxes.len() * LANES
+    /// Replaces the contents with the triangles of `from` at `slots`, as one
+    /// group culled as `cull`, in boxes that are never below a horizon (near
+    /// triangles are near). Allocation-free once the columns have grown.
+    fn gather(&mut self, from: &Corners, slots: &[u32], cull: bool) {
+        let padded = slots.len().next_multiple_of(LANES);
+        for (column, source) in self.corners.iter_mut().zip(&from.corners) {
+            column.clear();
+            column.extend(slots.iter().map(|&s| source[s as usize]));
+            column.resize(padded, f32::NAN);
+        }
+        self.boxes.clear();
+        self.boxes
+            .resize(padded / LANES, (Vec3::ZERO, Vec3::INFINITY));
+        self.objects.clear();
+        self.objects.push(Group {
+            chunks: 0..padded / LANES,
+            cull,
+        });
+        self.triangles = slots.len();
     }
 
-    fn clear(&mut self) {
-        self.corners.iter_mut().for_each(Vec::clear);
-        self.boxes.clear();
-        self.objects.clear();
-        self.triangles = 0;
+    /// Where triangle `t` of object `o` goes when a scene whose objects
+    /// have `triangle_counts` is laid out by [`Corners::new`], one object
+    /// after another.
+    pub(crate) fn slot_bases(triangle_counts: impl IntoIterator<Item = usize>) -> Vec<u32> {
+        let mut base = 0;
+        triangle_counts
+            .into_iter()
+            .map(|n| {
+                let b = base as u32;
+                base += n.next_multiple_of(LANES);
+                b
+            })
+            .collect()
+    }
+
+    fn slots(&self) -> usize {
+        self.boxes.len() * LANES
     }
 
     /// The nine corner columns of `chunk`.
@@ -223,9 +240,11 @@ pub(crate) enum Candidates<'a> {
     All(&'a Corners),
     /// §3.2's two levels: the coarse triangles of every object but the
     /// receiver's own (`own`) near chords ([`is_near_chord`]), and the near
-    /// fine triangles (indices into [`Blockers`]' triangles).
+    /// fine triangles, given by their slots in `fine` (all the frame's
+    /// triangles, as [`Candidates::All`] has them).
     TwoLevel {
         coarse: &'a Corners,
+        fine: &'a Corners,
         own: usize,
         near: &'a [u32],
     },
@@ -380,42 +399,51 @@ impl<W: MaskRow> Job<'_, W> {
             Candidates::All(corners) => corners.slots(),
             Candidates::TwoLevel {
                 coarse,
+                fine,
                 own,
-                near: near_triangles,
+                near: near_slots,
             } => {
-                near.clear();
-                let triangles = &self.blockers.triangles;
-                let gathered = near_triangles.iter().map(|&t| triangles[t as usize]);
-                // Near triangles are near: their boxes would not cull.
-                let cull = self.blockers.objects[own].1;
-                near.push(self.blockers, gathered, cull, false);
+                near.gather(fine, near_slots, self.blockers.objects[own].1);
                 coarse.slots() + near.slots()
             }
         };
         fit(survivors, slots);
+        // Plain loops and direct calls only: a closure or an iterator
+        // adaptor here would be compiled apart from the `target_feature`
+        // function, for the baseline instruction set.
         let mut count = 0;
-        let mut run = |corners: &Corners, chunk: usize, cull: bool, chords: bool| {
-            setup(
-                corners, chunk, cull, chords, &frame, resolution, survivors, &mut count,
-            )
-        };
         match *self.candidates {
             Candidates::All(corners) => {
                 for g in &corners.objects {
-                    g.chunks
-                        .clone()
-                        .for_each(|chunk| run(corners, chunk, g.cull, false));
+                    for chunk in g.chunks.clone() {
+                        setup(
+                            corners, chunk, g.cull, false, &frame, resolution, survivors,
+                            &mut count,
+                        );
+                    }
                 }
             }
             Candidates::TwoLevel { coarse, own, .. } => {
                 for (o, g) in coarse.objects.iter().enumerate() {
-                    g.chunks
-                        .clone()
-                        .for_each(|chunk| run(coarse, chunk, g.cull, o == own));
+                    for chunk in g.chunks.clone() {
+                        setup(
+                            coarse,
+                            chunk,
+                            g.cull,
+                            o == own,
+                            &frame,
+                            resolution,
+                            survivors,
+                            &mut count,
+                        );
+                    }
                 }
-                let near: &Corners = near;
                 let cull = near.objects[0].cull;
-                (0..near.boxes.len()).for_each(|chunk| run(near, chunk, cull, false));
+                for chunk in 0..near.boxes.len() {
+                    setup(
+                        near, chunk, cull, false, &frame, resolution, survivors, &mut count,
+                    );
+                }
             }
         }
         let setup_end = start.map(|_| Instant::now());
@@ -471,10 +499,9 @@ impl<W: MaskRow> Job<'_, W> {
     }
 }
 
-/// Makes room for three codes per slot plus one chunk of overrun (the
-/// compaction writes every lane and advances only past survivors).
+/// Makes room for three codes per slot.
 fn fit(survivors: &mut Vec<u32>, slots: usize) {
-    let need = 3 * (slots + LANES);
+    let need = 3 * slots;
     if survivors.len() < need {
         survivors.resize(need, 0);
     }
@@ -528,6 +555,15 @@ fn setup(
         let chord = chords & is_near_chord(corners, e.behind);
         keep[l] = u32::from(e.kept & !chord);
     }
+    // Coherent chunks are often culled whole (a back-facing patch, a patch
+    // edge-on): then the plane codes are not needed.
+    let mut survived = 0u32;
+    for (l, &k) in keep.iter().enumerate() {
+        survived |= k << l;
+    }
+    if survived == 0 {
+        return;
+    }
     let mut codes = [[0u32; LANES]; 3];
     for (e, codes) in codes.iter_mut().enumerate() {
         for (l, code) in codes.iter_mut().enumerate() {
@@ -535,10 +571,13 @@ fn setup(
             *code = plane_code(m, resolution);
         }
     }
-    // Compaction: every lane is written, only survivors advance.
-    for l in 0..LANES {
+    // Compaction, survivor by survivor.
+    let mut bits = survived;
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
         survivors[*count..*count + 3].copy_from_slice(&[codes[0][l], codes[1][l], codes[2][l]]);
-        *count += 3 * keep[l] as usize;
+        *count += 3;
     }
 }
 
@@ -672,10 +711,19 @@ mod tests {
                             .map(|&t| (world(blockers.triangles[t as usize]), cull[own])),
                     ),
             );
+            let bases = Corners::slot_bases(blockers.objects.iter().map(|(r, _)| r.len()));
+            let near_slots: Vec<u32> = near
+                .iter()
+                .map(|&t| {
+                    let o = object_of(t as usize);
+                    bases[o] + t - blockers.objects[o].0.start as u32
+                })
+                .collect();
             let two_level = Candidates::TwoLevel {
                 coarse: &coarse,
+                fine: &all,
                 own,
-                near: &near,
+                near: &near_slots,
             };
             for simd in Simd::available() {
                 let got = receiver_mask(

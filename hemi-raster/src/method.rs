@@ -132,14 +132,12 @@ impl<W: MaskRow> Pipeline<W> {
         hierarchy: Option<&TwoLevel>,
         profile: Option<&mut UpdateProfile>,
     ) {
-        let corners = match hierarchy {
-            Some(h) => h.corners(blockers),
-            None => Corners::new(blockers, &blockers.triangles, blockers.objects.clone()),
-        };
+        let fine = Corners::new(blockers, &blockers.triangles, blockers.objects.clone());
+        let levels = hierarchy.map(|h| (h, h.corners(blockers)));
         let (lut, simd) = (self.raster.lut(), self.simd);
-        let candidates = |v: usize| match hierarchy {
-            Some(h) => h.candidates(&corners, v),
-            None => Candidates::All(&corners),
+        let candidates = |v: usize| match &levels {
+            Some((h, coarse)) => h.candidates(coarse, &fine, v),
+            None => Candidates::All(&fine),
         };
         let mask = |scratch: &mut Scratch, v: usize| {
             receiver_mask(
