@@ -2,8 +2,8 @@
 
 use std::f32::consts::{PI, TAU};
 
-use glam::Vec3;
-use shadow_core::{Mesh, Result};
+use glam::{Vec2, Vec3};
+use shadow_core::{Error, Mesh, Result};
 
 /// A UV sphere with outward normals (analytic, not area-weighted).
 pub fn uv_sphere(name: &str, center: Vec3, radius: f32, rings: u32, segments: u32) -> Result<Mesh> {
@@ -60,6 +60,84 @@ pub fn grid(name: &str, origin: Vec3, du: Vec3, dv: Vec3, nu: u32, nv: u32) -> R
             let a = i * row + j;
             triangles.push([a, a + row, a + row + 1]);
             triangles.push([a, a + row + 1, a + 1]);
+        }
+    }
+    Mesh::new(name, positions, None, triangles)
+}
+
+/// A closed surface of revolution about +Y: the profile polyline, given as
+/// (radius, height) points from the axis back to the axis, swept through
+/// `segments` equal steps of a full turn.
+///
+/// The first and last points must lie on the axis (radius 0): each becomes a
+/// single pole vertex, so the ends are capped (a flat foot when the first ring
+/// is at the pole's height) and, with the seam shared rather than duplicated,
+/// the mesh has no boundary edge and reports [`Mesh::is_closed`]. Every point
+/// in between must be off the axis, and the profile should not cross itself.
+/// Triangles wind counter-clockwise seen from the right of the profile as it
+/// is walked from the bottom pole to the top pole (radius to the right, height
+/// up): outward for a profile that goes out, up and back in. Normals are area-weighted, so creases of the
+/// profile are smoothed over (per-vertex shading cannot hold a crease on a
+/// shared vertex anyway).
+pub fn lathe(name: &str, profile: &[Vec2], segments: u32) -> Result<Mesh> {
+    let bad = |what: String| Error::InvalidMesh {
+        name: name.to_string(),
+        what,
+    };
+    let (Some(first), Some(last)) = (profile.first(), profile.last()) else {
+        return Err(bad("empty lathe profile".into()));
+    };
+    if profile.len() < 3 || segments < 3 {
+        return Err(bad(format!(
+            "a lathe needs at least 3 profile points and 3 segments, got {} and {segments}",
+            profile.len()
+        )));
+    }
+    if first.x != 0.0 || last.x != 0.0 {
+        return Err(bad(format!(
+            "lathe profile must start and end on the axis (radius 0), got {first} and {last}"
+        )));
+    }
+    let rings = &profile[1..profile.len() - 1];
+    if let Some(i) = rings.iter().position(|p| p.x.is_nan() || p.x <= 0.0) {
+        return Err(bad(format!(
+            "lathe profile point {} has radius {}: only the ends may lie on the axis",
+            i + 1,
+            rings[i].x
+        )));
+    }
+    // Vertex order: bottom pole, each ring's `segments` vertices, top pole.
+    let mut positions = vec![Vec3::new(0.0, first.y, 0.0)];
+    for p in rings {
+        positions.extend((0..segments).map(|j| {
+            // A turn by φ about +Y maps +X to (cos φ, 0, −sin φ).
+            let phi = TAU * j as f32 / segments as f32;
+            Vec3::new(p.x * phi.cos(), p.y, -p.x * phi.sin())
+        }));
+    }
+    let top = positions.len() as u32;
+    positions.push(Vec3::new(0.0, last.y, 0.0));
+
+    // Index of vertex j (mod `segments`) on profile point i.
+    let at = |i: usize, j: u32| -> u32 {
+        match i {
+            0 => 0,
+            i if i == profile.len() - 1 => top,
+            i => 1 + (i as u32 - 1) * segments + j % segments,
+        }
+    };
+    let mut triangles = Vec::with_capacity(2 * segments as usize * rings.len());
+    for i in 0..profile.len() - 1 {
+        for j in 0..segments {
+            let (a0, a1, b0, b1) = (at(i, j), at(i, j + 1), at(i + 1, j), at(i + 1, j + 1));
+            // Each band is a ring of quads; next to a pole one triangle of
+            // each quad collapses and is not emitted.
+            if i > 0 {
+                triangles.push([a0, a1, b0]);
+            }
+            if i + 1 < profile.len() - 1 {
+                triangles.push([a1, b1, b0]);
+            }
         }
     }
     Mesh::new(name, positions, None, triangles)
@@ -137,6 +215,84 @@ mod tests {
                 assert_eq!(outward, !inward);
             }
         }
+    }
+
+    /// Volume enclosed by a closed mesh (divergence theorem): positive when
+    /// every face winds outward.
+    fn signed_volume(m: &Mesh) -> f32 {
+        m.triangles()
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| m.positions()[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
+    #[test]
+    fn lathe_of_a_rectangle_is_a_closed_outward_prism() {
+        let profile = [
+            Vec2::new(0.0, 1.0),
+            Vec2::new(0.5, 1.0),
+            Vec2::new(0.5, 3.0),
+            Vec2::new(0.0, 3.0),
+        ];
+        let m = lathe("cylinder", &profile, 12).unwrap();
+        assert!(m.is_closed());
+        assert_eq!(m.vertex_count(), 2 + 2 * 12);
+        assert_eq!(m.triangle_count(), 4 * 12);
+        assert_eq!(m.report().degenerate_triangles, 0);
+        // A regular 12-gon prism: area (n/2) r² sin(2π/n), height 2.
+        let area = 6.0 * 0.25 * (TAU / 12.0).sin();
+        assert_relative_eq!(signed_volume(&m), area * 2.0, epsilon = 1e-5);
+        let b = m.bounds();
+        assert_relative_eq!(b.min.y, 1.0);
+        assert_relative_eq!(b.max.y, 3.0);
+    }
+
+    #[test]
+    fn lathe_winds_a_hollow_top_outward_too() {
+        // A cup: out, up, in across the rim, down into the bowl, to the axis.
+        let profile = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(0.5, 1.0),
+            Vec2::new(0.5, 0.5),
+            Vec2::new(0.0, 0.5),
+        ];
+        let m = lathe("cup", &profile, 64).unwrap();
+        assert!(m.is_closed());
+        // Outer cylinder minus the bowl, to within the polygon's area loss.
+        let expected = std::f32::consts::PI * (1.0 - 0.25 * 0.5);
+        assert_relative_eq!(signed_volume(&m), expected, max_relative = 0.01);
+        // The bowl's floor faces up.
+        let floor_normal = m.normals()[m.vertex_count() - 1];
+        assert_relative_eq!(floor_normal, Vec3::Y, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn bad_lathe_profiles_are_errors() {
+        let open = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(1.0, 1.0),
+        ];
+        let msg = lathe("p", &open, 8).unwrap_err().to_string();
+        assert!(msg.contains("on the axis"), "{msg}");
+        let pinched = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.0, 0.5),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(0.0, 1.0),
+        ];
+        let msg = lathe("p", &pinched, 8).unwrap_err().to_string();
+        assert!(msg.contains("point 2"), "{msg}");
+        assert!(lathe("p", &[], 8).is_err());
+        let tiny = [Vec2::ZERO, Vec2::X, Vec2::Y];
+        assert!(lathe("p", &tiny, 2).is_err());
+        assert!(lathe("p", &tiny, 3).unwrap().is_closed());
     }
 
     #[test]
