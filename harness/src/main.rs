@@ -6,8 +6,9 @@ use std::{path::PathBuf, time::Instant};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use harness::{
+    accuracy::{self, AccuracyReport, Plan},
     export, methods,
-    reference::{self, ReferenceCache, ReferenceSettings},
+    reference::{self, ReferenceCache, ReferenceSettings, transfer::TransferSettings},
     report::{MachineInfo, ReferenceInfo, Report},
     run,
     scenes::{self, ENVIRONMENTS, SCENES},
@@ -66,6 +67,32 @@ enum Command {
         #[command(flatten)]
         estimator: EstimatorArgs,
         #[arg(long, default_value_t = 3)]
+        repeats: usize,
+    },
+    /// Score hemi-raster's options (hierarchy, plane table, mask, integration)
+    /// by Kautz et al.'s transfer error and by radiance error; write
+    /// accuracy.md and accuracy.json.
+    Accuracy {
+        /// Only these built-in scenes (comma separated); default those of
+        /// human, cloth and chess that are built in.
+        #[arg(long = "scene", value_delimiter = ',')]
+        scenes: Vec<String>,
+        /// One environment for every scene instead of each scene's own.
+        #[arg(long)]
+        env: Option<String>,
+        /// Where to write accuracy.md and accuracy.json.
+        #[arg(long, default_value = "reports")]
+        out: PathBuf,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
+        /// Rays per replicate of the transfer reference.
+        #[arg(long, default_value_t = TransferSettings::CONVERGED.replicate_size)]
+        transfer_rays: u32,
+        /// Replicates per vertex of the transfer reference (at least 2).
+        #[arg(long, default_value_t = TransferSettings::CONVERGED.replicates)]
+        transfer_replicates: u32,
+        /// Timed runs of update and shade per frame; medians are reported.
+        #[arg(long, default_value_t = 1)]
         repeats: usize,
     },
 }
@@ -308,6 +335,59 @@ fn main() -> Result<()> {
                 "wrote report.md, report.json and speed-vs-error.png in {}",
                 dir.display()
             );
+        }
+        Command::Accuracy {
+            scenes: chosen,
+            env,
+            out,
+            estimator,
+            transfer_rays,
+            transfer_replicates,
+            repeats,
+        } => {
+            let names: Vec<&str> = if chosen.is_empty() {
+                accuracy::DEFAULT_SCENES
+                    .iter()
+                    .copied()
+                    .filter(|name| SCENES.iter().any(|s| s.name == *name))
+                    .collect()
+            } else {
+                chosen.iter().map(String::as_str).collect()
+            };
+            let plan = Plan {
+                transfer: TransferSettings {
+                    replicate_size: transfer_rays,
+                    replicates: transfer_replicates,
+                    ..TransferSettings::CONVERGED
+                },
+                repeats,
+                ..Plan::default()
+            };
+            let mut report = AccuracyReport {
+                machine: MachineInfo::detect(None),
+                repeats,
+                scenes: Vec::new(),
+            };
+            for name in names {
+                let scene = scenes::builtin(name)?;
+                let env_name = env.as_deref().unwrap_or_else(|| {
+                    SCENES
+                        .iter()
+                        .find(|s| s.name == name)
+                        .map_or("uniform", |s| s.environment)
+                });
+                let environment = scenes::environment(env_name)
+                    .with_context(|| format!("loading environment {env_name}"))?;
+                let (refs, info) = references(&scene, &environment, &estimator)?;
+                let bar = progress(&format!("accuracy {name}"));
+                let result = accuracy::evaluate(&scene, &environment, &refs, info, &plan, &bar)
+                    .with_context(|| format!("accuracy on {name}"))?;
+                bar.finish_and_clear();
+                report.scenes.push(result);
+            }
+            report.write(&out)?;
+            print!("{}", report.markdown());
+            println!("wrote accuracy.md and accuracy.json in {}", out.display());
         }
     }
     Ok(())

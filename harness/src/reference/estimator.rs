@@ -145,7 +145,7 @@ impl Estimator<'_> {
 /// second Sobol's second dimension (Kollig and Keller 2002, "Efficient
 /// multidimensional sampling").
 #[inline]
-fn sobol2(i: u32, shift: [u32; 2]) -> Vec2 {
+pub(super) fn sobol2(i: u32, shift: [u32; 2]) -> Vec2 {
     let x = i.reverse_bits();
     let mut y = 0u32;
     let mut v = 1u32 << 31;
@@ -165,7 +165,7 @@ fn sobol2(i: u32, shift: [u32; 2]) -> Vec2 {
 /// Malley's method: a uniform disk sample lifted to the hemisphere (z up) has
 /// density cos θ / π.
 #[inline]
-fn cosine_hemisphere(u: Vec2) -> Vec3 {
+pub(super) fn cosine_hemisphere(u: Vec2) -> Vec3 {
     let r = u.x.sqrt();
     let phi = std::f32::consts::TAU * u.y;
     let (s, c) = phi.sin_cos();

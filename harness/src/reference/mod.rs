@@ -5,6 +5,7 @@
 
 mod cache;
 mod estimator;
+pub mod transfer;
 
 use std::time::Instant;
 
