@@ -188,9 +188,11 @@ impl Corners {
     fn gather(&mut self, from: &Corners, slots: &[u32], cull: bool) {
         let padded = slots.len().next_multiple_of(LANES);
         for (column, source) in self.corners.iter_mut().zip(&from.corners) {
-            column.clear();
-            column.extend(slots.iter().map(|&s| source[s as usize]));
             column.resize(padded, f32::NAN);
+            column[slots.len()..].fill(f32::NAN);
+            for (d, &s) in column.iter_mut().zip(slots) {
+                *d = source[s as usize];
+            }
         }
         self.boxes.clear();
         self.boxes
