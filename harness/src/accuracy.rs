@@ -52,6 +52,7 @@ pub struct Variant {
 pub fn variants() -> Vec<Variant> {
     let paper = Config::default();
     let with = |name, what, config| Variant { name, what, config };
+
     vec![
         with(
             "default",
@@ -63,6 +64,22 @@ pub fn variants() -> Vec<Variant> {
             "no hierarchy: every triangle at full resolution",
             Config {
                 hierarchy: Hierarchy::Flat,
+                ..paper
+            },
+        ),
+        with(
+            "rings-only",
+            "two-level, but full resolution over the two-ring only (near_reach 0)",
+            Config {
+                hierarchy: paper.hierarchy.with_near_reach(0),
+                ..paper
+            },
+        ),
+        with(
+            "coarse-300",
+            "two-level, every object kept at 300 coarse triangles or more",
+            Config {
+                hierarchy: paper.hierarchy.with_min_coarse_triangles(300),
                 ..paper
             },
         ),

@@ -405,7 +405,11 @@ mod tests {
             camera(),
         )
         .unwrap();
-        let (h, hb) = blocked(Config::default(), &scene, 0);
+        let whole = Config {
+            hierarchy: Hierarchy::default().with_min_coarse_triangles(100),
+            ..Config::default()
+        };
+        let (h, hb) = blocked(whole, &scene, 0);
         let (f, fb) = blocked(flat(), &scene, 0);
         assert_eq!(h.coarse_triangle_count(0), Some(80));
         assert_eq!(h.coarse_triangle_count(1), Some(72));
