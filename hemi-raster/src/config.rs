@@ -125,11 +125,12 @@ impl Hierarchy {
 impl Default for Hierarchy {
     /// One tenth of every object's triangles, at least 40, with the
     /// two-ring: close to the paper's Table 1 (2,560 → 160, 4,806 → 444,
-    /// 3,704 → 382 triangles; our human's three parts give 513, the chess
-    /// scene's pieces and board 352); plus the fine triangles within twice
+    /// 3,704 → 382 triangles; the harness's human, three open parts, gets
+    /// 735, meshoptimizer stopping short of the target at their borders,
+    /// the chess scene 428, the cloth 267); plus the fine triangles within twice
     /// the mean coarse triangle radius. (The floor was 300 per object at
-    /// first, which left small objects nearly whole: 900 coarse triangles on
-    /// the human, 2,550 candidate blockers per vertex on the chess scene.)
+    /// first, which left small objects nearly whole: 2,550 candidate
+    /// blockers per vertex on the chess scene.)
     fn default() -> Self {
         Hierarchy::TwoLevel {
             coarse_divisor: NonZeroU32::new(10).expect("10 is not zero"),
