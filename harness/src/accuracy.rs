@@ -76,10 +76,10 @@ pub fn variants() -> Vec<Variant> {
             },
         ),
         with(
-            "coarse-300",
-            "two-level, every object kept at 300 coarse triangles or more",
+            "coarse-40",
+            "two-level, small objects simplified too (at least 40 coarse triangles, not 300)",
             Config {
-                hierarchy: paper.hierarchy.with_min_coarse_triangles(300),
+                hierarchy: paper.hierarchy.with_min_coarse_triangles(40),
                 ..paper
             },
         ),
