@@ -22,4 +22,7 @@ pub use lut::PlaneLut;
 pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
 pub use method::{HemiRaster, UpdateProfile};
 pub use rasterize::{Rasterizer, TangentFrame};
-pub use transfer::{Integration, direct_irradiance, pixel_angle, sh_transfer};
+pub use transfer::{
+    Integration, LOBE_CUTOFF, LobeGrid, PhongLobe, direct_glossy, direct_irradiance,
+    glossy_transfer, pixel_angle, sh_transfer,
+};

@@ -8,7 +8,7 @@ use shadow_core::sh::{ShOrder, ShRgb, ShRotation, Zonal, project_fn_rgb};
 
 use crate::mask::Mask;
 use crate::rasterize::{Rasterizer, TangentFrame};
-use crate::transfer::sh_transfer;
+use crate::transfer::{LobeGrid, PhongLobe, glossy_transfer, sh_transfer};
 
 fn raster() -> &'static Rasterizer<u32> {
     static RASTER: OnceLock<Rasterizer<u32>> = OnceLock::new();
@@ -63,6 +63,84 @@ fn irradiance(normal: Vec3, tris: &[[Vec3; 3]], light: &ShRgb, blocks: bool) -> 
     light.dot(&t)
 }
 
+/// Specular radiance (without ρ_s) toward `view` at a receiver, through
+/// mask and glossy transfer (order 5, exponent 20).
+fn glossy(normal: Vec3, view: Vec3, tris: &[[Vec3; 3]], light: &ShRgb, blocks: bool) -> Vec3 {
+    let raster = raster();
+    let frame = TangentFrame::new(Vec3::ZERO, normal);
+    let mask = raster.mask(&frame, tris, false);
+    let lobe = PhongLobe::new(&frame, view, 20.0);
+    let mut t = vec![0.0; light.order().coeff_count()];
+    let lobes = LobeGrid::new(raster.grid());
+    glossy_transfer(&lobes, &mask, &frame, &lobe, light.order(), blocks, &mut t);
+    light.dot(&t)
+}
+
+/// A lighting with detail: brighter up and toward +x, and a spot near the
+/// mirror direction of the glossy test's view.
+fn lighting(order: ShOrder) -> ShRgb {
+    project_fn_rgb(order, 32, |d| {
+        let spot = (6.0 * (d.dot(Vec3::new(-0.5, 0.8, -0.3).normalize()) - 1.0)).exp();
+        Vec3::new(
+            1.0 + d.y.max(0.0) * 2.0,
+            0.6 + 0.4 * d.x,
+            0.8 + 0.5 * d.z * d.z,
+        ) + 3.0 * spot
+    })
+}
+
+/// The view of the glossy test, at a receiver with normal +y.
+fn glossy_view() -> Vec3 {
+    Vec3::new(0.5, 0.8, 0.3).normalize()
+}
+
+/// The exact specular radiance of [`glossy`] at the unturned setup, with
+/// visibility by ray casting against the blockers instead of a mask: a
+/// 1024² grid over the disk (cosine-weighted solid angle by area).
+fn exact_glossy() -> Vec3 {
+    static EXACT: OnceLock<Vec3> = OnceLock::new();
+    *EXACT.get_or_init(|| {
+        let light = lighting(ShOrder::new(5).unwrap());
+        let frame = TangentFrame::new(Vec3::ZERO, Vec3::Y);
+        let r = shadow_core::reflect(glossy_view(), Vec3::Y);
+        let n = 1024;
+        let step = 2.0 / n as f32;
+        let hits = |d: Vec3| {
+            blockers().iter().any(|&[a, b, c]| {
+                // Möller–Trumbore from the origin along d.
+                let (e1, e2) = (b - a, c - a);
+                let p = d.cross(e2);
+                let det = e1.dot(p);
+                let s = -a;
+                let u = s.dot(p) / det;
+                let q = s.cross(e1);
+                let v = d.dot(q) / det;
+                let t = e2.dot(q) / det;
+                u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0
+            })
+        };
+        let mut sum = Vec3::ZERO;
+        for i in 0..n {
+            for j in 0..n {
+                let (x, y) = (
+                    -1.0 + (j as f32 + 0.5) * step,
+                    -1.0 + (i as f32 + 0.5) * step,
+                );
+                let rho2 = x * x + y * y;
+                if rho2 >= 1.0 {
+                    continue;
+                }
+                let w = frame.to_world() * Vec3::new(x, y, (1.0 - rho2).sqrt());
+                let lobe = r.dot(w).max(0.0).powi(20) * 22.0 / std::f32::consts::TAU;
+                if lobe > 1e-7 && !hits(w) {
+                    sum += lobe * light.eval(w);
+                }
+            }
+        }
+        sum * step * step
+    })
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
@@ -105,5 +183,33 @@ proptest! {
         // rotations the spread was 1.7% (2.0% under uniform light, i.e. in
         // the coverage itself: 1.2% of π, three triangles' quantization).
         prop_assert!(rel < 0.025, "{e0} vs {e1}: {rel}");
+    }
+
+    /// The glossy transfer, the view turned with the setup, against the
+    /// exact integral with ray-cast visibility: the lobe's axis and the SH
+    /// basis are handled in world space consistently (unoccluded, the turn
+    /// changes the result by 10⁻⁵), and what remains is the mask's
+    /// quantization of the blocker edges. Two thirds of this lobe
+    /// (exponent 20) are blocked, and edges crossing it weigh far more
+    /// than for the cosine: over 600 rotations the error was 2.3% median,
+    /// 5.8% at p90, 12% at most, the same with every pixel classified
+    /// exactly by ray casting (so it is the 32×32 pixels, not the table).
+    #[test]
+    fn turned_glossy_setups_match_the_exact_integral(
+        q in rotation(),
+        blocks in any::<bool>(),
+    ) {
+        let order = ShOrder::new(5).unwrap();
+        let (light, view) = (lighting(order), glossy_view());
+        let rotated = light.rotated(&ShRotation::from_quat(order, q).unwrap());
+        let open = glossy(Vec3::Y, view, &[], &light, blocks);
+        let turned_open = glossy(q * Vec3::Y, q * view, &[], &rotated, blocks);
+        let rel = (turned_open - open).length() / open.length();
+        prop_assert!(rel < 1e-4, "unoccluded: {open} vs {turned_open}: {rel}");
+        let turned: Vec<[Vec3; 3]> = blockers().iter().map(|t| t.map(|p| q * p)).collect();
+        let g = glossy(q * Vec3::Y, q * view, &turned, &rotated, blocks);
+        let exact = exact_glossy();
+        let rel = (g - exact).length() / exact.length();
+        prop_assert!(rel < 0.15, "{g} vs {exact}: {rel}");
     }
 }
