@@ -38,11 +38,11 @@
 //! left chords over the new folds and 18% transfer error against 3.8%
 //! flat.)
 //!
-//! On the skinned human of the harness (5,126 → 512 triangles, two-ring),
-//! the rings alone gave about 28% error against the reference (11.1% flat):
-//! vertices that flat mode finds fully occluded, in cavities and under close
-//! folds, were lit once the coarse surface cut past them. With `near_reach`
-//! 2 the error was 11.5%, with 3 10.2%; without the skip rule, 32%.
+//! On the skinned human of the harness (three open parts, 5,126 → 931
+//! coarse triangles, two-ring), the rings alone gave a much larger error
+//! than `near_reach` 2 (`harness accuracy`, row `rings-only`, and the
+//! crate README): vertices that flat mode finds fully occluded, in cavities
+//! and under close folds, were lit once the coarse surface cut past them.
 //!
 //! Skipping more was tried and is worse, because a skipped coarse triangle
 //! takes its far part away too, leaving a hole. On the test's bumpy sphere

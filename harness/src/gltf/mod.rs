@@ -140,7 +140,7 @@ impl GltfAsset {
     /// Errors (all naming the file): unreadable file, truncated GLB, malformed
     /// JSON, references or accessor byte ranges out of range, vertex indices
     /// out of range (naming the mesh), required extensions ("unsupported
-    /// extension <name>"), invalid skins or animations, no triangle mesh.
+    /// extension `<name>`"), invalid skins or animations, no triangle mesh.
     pub fn load(path: &Path) -> Result<GltfAsset> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let bad = |what: String| Error::format(path, what);

@@ -35,7 +35,7 @@ pub struct ReferenceSettings {
     pub max_replicates: u32,
     /// Run until the relative L2 noise `sqrt(Σ|SE|² / Σ|L|²)` is at most this,
     /// giving each point the replicates its own variance calls for (see
-    /// [`allocate`]; at most `max_replicates`). `None` runs exactly
+    /// `allocate`; at most `max_replicates`). `None` runs exactly
     /// `min_replicates` per point.
     pub target_noise: Option<f32>,
 }
