@@ -85,40 +85,24 @@ pub enum Hierarchy {
 
 impl Hierarchy {
     /// The same hierarchy with `near_reach` (no change to [`Hierarchy::Flat`]).
-    pub fn with_near_reach(self, near_reach: u8) -> Hierarchy {
-        match self {
-            Hierarchy::TwoLevel {
-                coarse_divisor,
-                min_coarse_triangles,
-                near,
-                ..
-            } => Hierarchy::TwoLevel {
-                coarse_divisor,
-                min_coarse_triangles,
-                near,
-                near_reach,
-            },
-            Hierarchy::Flat => Hierarchy::Flat,
+    pub fn with_near_reach(mut self, near_reach: u8) -> Hierarchy {
+        if let Hierarchy::TwoLevel { near_reach: r, .. } = &mut self {
+            *r = near_reach;
         }
+        self
     }
 
     /// The same hierarchy with `min_coarse_triangles` (no change to
     /// [`Hierarchy::Flat`]).
-    pub fn with_min_coarse_triangles(self, min_coarse_triangles: u32) -> Hierarchy {
-        match self {
-            Hierarchy::TwoLevel {
-                coarse_divisor,
-                near,
-                near_reach,
-                ..
-            } => Hierarchy::TwoLevel {
-                coarse_divisor,
-                min_coarse_triangles,
-                near,
-                near_reach,
-            },
-            Hierarchy::Flat => Hierarchy::Flat,
+    pub fn with_min_coarse_triangles(mut self, min_coarse_triangles: u32) -> Hierarchy {
+        if let Hierarchy::TwoLevel {
+            min_coarse_triangles: m,
+            ..
+        } = &mut self
+        {
+            *m = min_coarse_triangles;
         }
+        self
     }
 }
 

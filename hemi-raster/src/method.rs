@@ -514,17 +514,6 @@ impl ShadowMethod for HemiRaster {
     /// Rasterizes every triangle of the frame into every vertex's mask (in
     /// parallel over vertices), then integrates the transfer vectors.
     fn update(&mut self, frame: &FrameGeometry) -> Result<()> {
-        let prepared = self
-            .scene
-            .as_ref()
-            .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
-        let counts: Vec<usize> = frame.objects.iter().map(|o| o.vertex_count()).collect();
-        if counts != prepared.vertex_counts {
-            return Err(Error::InvalidScene(format!(
-                "{NAME}: frame {} has vertex counts {counts:?} per object, the prepared scene {:?}",
-                frame.frame, prepared.vertex_counts
-            )));
-        }
         self.update_frame(frame, None)
     }
 
