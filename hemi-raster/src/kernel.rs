@@ -5,10 +5,12 @@
 //!
 //! 1. **Setup** (the paper's Table 2 "transform": moving blockers into the
 //!    receiver's frame and culling them), 16 triangles at a time with no
-//!    branch: the three corners go into the tangent frame, the triangle is
-//!    culled below the horizon, through the receiver or as a back face, the
-//!    three edge-plane normals are computed and turned into plane-table
-//!    cells, and the survivors' cells are appended to a list.
+//!    per-triangle branch: the three corners go into the tangent frame, the
+//!    triangle is culled below the horizon, through the receiver, as a back
+//!    face or as a near chord of the receiver's own object (see
+//!    [`is_near_chord`]), the three edge-plane normals are computed and
+//!    turned into plane-table cells (skipped when the whole chunk is
+//!    culled), and the survivors' cells are appended to a list.
 //! 2. **Lookup** (the paper's "rasterization"): per survivor, the three plane
 //!    masks are ANDed and ORed into the visibility mask, one whole mask row
 //!    per SIMD lane.
@@ -20,9 +22,10 @@
 //! box is computed per frame, so it holds for rigid, skinned and deformed
 //! poses alike; a receiver skips every chunk whose box lies below its
 //! tangent plane (§3.2, hierarchical culling). The test keeps a margin of
-//! 10⁻⁵ of the box's distance, far above the rounding of the per-triangle
-//! test, so that a skipped chunk holds only triangles the per-triangle test
-//! would cull too: the masks are identical with and without it.
+//! 10⁻⁵ of the magnitude of the coordinates involved, far above the
+//! rounding of the per-triangle test, so that a skipped chunk holds only
+//! triangles the per-triangle test would cull too: the masks are identical
+//! with and without it.
 //!
 //! # Instruction sets
 //! The loop is written once, as plain fixed-width loops that the compiler
