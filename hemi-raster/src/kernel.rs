@@ -185,29 +185,6 @@ impl Corners {
         });
     }
 
-    /// Replaces the contents with the triangles of `from` at `slots`, as one
-    /// group culled as `cull`, in boxes that are never below a horizon (near
-    /// triangles are near). Allocation-free once the columns have grown.
-    fn gather(&mut self, from: &Corners, slots: &[u32], cull: bool) {
-        let padded = slots.len().next_multiple_of(LANES);
-        for (column, source) in self.corners.iter_mut().zip(&from.corners) {
-            column.resize(padded, f32::NAN);
-            column[slots.len()..].fill(f32::NAN);
-            for (d, &s) in column.iter_mut().zip(slots) {
-                *d = source[s as usize];
-            }
-        }
-        self.boxes.clear();
-        self.boxes
-            .resize(padded / LANES, (Vec3::ZERO, Vec3::INFINITY));
-        self.objects.clear();
-        self.objects.push(Group {
-            chunks: 0..padded / LANES,
-            cull,
-        });
-        self.triangles = slots.len();
-    }
-
     /// Where triangle `t` of object `o` goes when a scene whose objects
     /// have `triangle_counts` is laid out by [`Corners::new`], one object
     /// after another.
@@ -225,6 +202,13 @@ impl Corners {
 
     fn slots(&self) -> usize {
         self.boxes.len() * LANES
+    }
+
+    /// Whether `chunk`'s box lies below the receiver's tangent plane.
+    #[inline(always)]
+    fn below(&self, chunk: usize, frame: &Frame) -> bool {
+        let (centre, half) = self.boxes[chunk];
+        frame.below(centre, half)
     }
 
     /// The nine corner columns of `chunk`.
@@ -272,8 +256,6 @@ impl Candidates<'_> {
 pub(crate) struct Scratch {
     /// Three plane-cell codes per surviving triangle.
     survivors: Vec<u32>,
-    /// The current receiver's near triangles, gathered.
-    near: Corners,
     /// Time and counts of the two phases, when profiling.
     profile: Option<LoopProfile>,
 }
@@ -395,22 +377,12 @@ impl<W: MaskRow> Job<'_, W> {
         };
         let resolution = self.lut.resolution() as u32;
         let start = scratch.profile.is_some().then(Instant::now);
-        let Scratch {
-            survivors,
-            near,
-            profile,
-        } = scratch;
+        let Scratch { survivors, profile } = scratch;
         let slots = match *self.candidates {
             Candidates::All(corners) => corners.slots(),
             Candidates::TwoLevel {
-                coarse,
-                fine,
-                own,
-                near: near_slots,
-            } => {
-                near.gather(fine, near_slots, self.blockers.objects[own].1);
-                coarse.slots() + near.slots()
-            }
+                coarse, near: n, ..
+            } => coarse.slots() + n.len().next_multiple_of(LANES),
         };
         fit(survivors, slots);
         // Plain loops and direct calls only: a closure or an iterator
@@ -421,33 +393,47 @@ impl<W: MaskRow> Job<'_, W> {
             Candidates::All(corners) => {
                 for g in &corners.objects {
                     for chunk in g.chunks.clone() {
-                        setup(
-                            corners, chunk, g.cull, false, &frame, resolution, survivors,
-                            &mut count,
-                        );
+                        if !corners.below(chunk, &frame) {
+                            let c = corners.chunk(chunk);
+                            setup(c, g.cull, false, &frame, resolution, survivors, &mut count);
+                        }
                     }
                 }
             }
-            Candidates::TwoLevel { coarse, own, .. } => {
+            Candidates::TwoLevel {
+                coarse,
+                fine,
+                own,
+                near,
+            } => {
                 for (o, g) in coarse.objects.iter().enumerate() {
                     for chunk in g.chunks.clone() {
-                        setup(
-                            coarse,
-                            chunk,
-                            g.cull,
-                            o == own,
-                            &frame,
-                            resolution,
-                            survivors,
-                            &mut count,
-                        );
+                        if !coarse.below(chunk, &frame) {
+                            let c = coarse.chunk(chunk);
+                            setup(
+                                c,
+                                g.cull,
+                                o == own,
+                                &frame,
+                                resolution,
+                                survivors,
+                                &mut count,
+                            );
+                        }
                     }
                 }
-                let cull = near.objects[0].cull;
-                for chunk in 0..near.boxes.len() {
-                    setup(
-                        near, chunk, cull, false, &frame, resolution, survivors, &mut count,
-                    );
+                // Near triangles are read by slot from the frame's fine
+                // corners, 16 at a time; their boxes would not cull them.
+                let cull = self.blockers.objects[own].1;
+                for slots in near.chunks(LANES) {
+                    let mut columns = [[f32::NAN; LANES]; 9];
+                    for (k, column) in columns.iter_mut().enumerate() {
+                        for (value, &slot) in column.iter_mut().zip(slots) {
+                            *value = fine.corners[k][slot as usize];
+                        }
+                    }
+                    let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
+                    setup(c, cull, false, &frame, resolution, survivors, &mut count);
                 }
             }
         }
@@ -512,16 +498,15 @@ fn fit(survivors: &mut Vec<u32>, slots: usize) {
     }
 }
 
-/// Phase 1 on one chunk: appends the plane codes of its surviving triangles
-/// at `survivors[*count..]`; with `chords`, near chords
-/// ([`is_near_chord`]) are culled too.
+/// Phase 1 on one chunk, given by its nine corner columns: appends the plane
+/// codes of its surviving triangles at `survivors[*count..]`; with `chords`,
+/// near chords ([`is_near_chord`]) are culled too.
 /// Straight-line code over fixed-size arrays: the compiler turns the first
 /// loop into SIMD instructions, 16 triangles per pass.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn setup(
-    corners: &Corners,
-    chunk: usize,
+    c: [&[f32; LANES]; 9],
     cull: bool,
     chords: bool,
     frame: &Frame,
@@ -529,11 +514,6 @@ fn setup(
     survivors: &mut [u32],
     count: &mut usize,
 ) {
-    let (centre, half) = corners.boxes[chunk];
-    if frame.below(centre, half) {
-        return;
-    }
-    let c = corners.chunk(chunk);
     // Each step is a short loop over the lanes with arrays in and out: the
     // shape the vectorizer turns into a few SIMD instructions per step.
     let mut local = [[0.0f32; LANES]; 9];
