@@ -26,14 +26,14 @@ use shadow_core::{
 };
 
 use crate::{
-    io::write_atomic,
+    io::{write_atomic, write_json_atomic},
     reference::{
         VertexReference,
         transfer::{TransferReference, TransferSettings, scene_transfer_references},
     },
     report::{MachineInfo, ReferenceInfo},
     run::median,
-    score::{ErrorStats, compare},
+    score::{ErrorStats, against},
 };
 
 /// The scenes of the paper's Table 1 that have a built-in counterpart:
@@ -497,7 +497,7 @@ impl Bounds {
                 self.lambert.project_along(normal, t);
             }
             score.add(&transfer, reference.mean(), Some(reference.std_error()), n)?;
-            errors.push(radiance_stats(&self.shade(&transfer), rad));
+            errors.push(against(&self.shade(&transfer), rad));
         }
         Ok(Row {
             name: "unshadowed".into(),
@@ -513,7 +513,7 @@ impl Bounds {
         let errors: Vec<ErrorStats> = radiance
             .iter()
             .zip(references)
-            .map(|(rad, reference)| radiance_stats(&self.shade(reference.mean()), rad))
+            .map(|(rad, reference)| against(&self.shade(reference.mean()), rad))
             .collect();
         Row {
             name: "reference transfer".into(),
@@ -526,17 +526,6 @@ impl Bounds {
             frame_ms: None,
         }
     }
-}
-
-/// Scores per-vertex radiance against a radiance reference.
-fn radiance_stats(values: &[Vec3], reference: &VertexReference) -> ErrorStats {
-    let expected: Vec<Vec3> = reference.radiance.flat().collect();
-    let se: Option<Vec<Vec3>> = reference
-        .radiance
-        .std_error
-        .as_ref()
-        .map(|s| s.iter().flatten().copied().collect());
-    compare(values, &expected, se.as_deref())
 }
 
 /// Runs one configuration over every frame: radiance and (for the SH
@@ -576,7 +565,7 @@ fn run_variant(
         frame_seconds.push(median(update) + median(shade));
         let shading = shading.expect("at least one repeat");
         let values: Vec<Vec3> = shading.flat().collect();
-        errors.push(radiance_stats(&values, rad));
+        errors.push(against(&values, rad));
         if has_transfer {
             transfer.clear();
             for (o, object) in frame.objects.iter().enumerate() {
@@ -613,9 +602,7 @@ pub struct AccuracyReport {
 impl AccuracyReport {
     /// Writes `accuracy.json` and `accuracy.md` into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let json = serde_json::to_vec_pretty(self)
-            .map_err(|e| Error::format(dir.join("accuracy.json"), e.to_string()))?;
-        write_atomic(&dir.join("accuracy.json"), &json)?;
+        write_json_atomic(&dir.join("accuracy.json"), self)?;
         write_atomic(&dir.join("accuracy.md"), self.markdown().as_bytes())
     }
 

@@ -4,9 +4,12 @@
 use std::{fmt::Write, path::Path};
 
 use serde::Serialize;
-use shadow_core::{Error, Result};
+use shadow_core::Result;
 
-use crate::{io::write_atomic, run::RunResult};
+use crate::{
+    io::{write_atomic, write_json_atomic},
+    run::RunResult,
+};
 
 /// The chart's file name beside the report.
 const CHART: &str = "speed-vs-error.png";
@@ -73,9 +76,7 @@ impl Report {
     /// Writes `report.json`, `report.md` and the speed-versus-error chart
     /// `speed-vs-error.png` into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let json = serde_json::to_vec_pretty(self)
-            .map_err(|e| Error::format(dir.join("report.json"), e.to_string()))?;
-        write_atomic(&dir.join("report.json"), &json)?;
+        write_json_atomic(&dir.join("report.json"), self)?;
         crate::chart::speed_vs_error(&self.runs, &dir.join(CHART))?;
         write_atomic(&dir.join("report.md"), self.markdown().as_bytes())
     }

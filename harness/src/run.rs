@@ -8,7 +8,7 @@ use shadow_core::{Capabilities, Environment, Result, Scene, ShadowMethod, Vertex
 
 use crate::{
     reference::VertexReference,
-    score::{ErrorStats, compare},
+    score::{ErrorStats, against},
 };
 
 /// Seconds of stage time per frame after which repeats stop.
@@ -96,15 +96,9 @@ pub fn run(
         }
         let shading = shading.expect("at least one repeat");
         let values: Vec<_> = shading.flat().collect();
-        let expected: Vec<_> = reference.radiance.flat().collect();
-        let se: Option<Vec<_>> = reference
-            .radiance
-            .std_error
-            .as_ref()
-            .map(|s| s.iter().flatten().copied().collect());
         frames.push(FrameResult {
             frame: index,
-            error: compare(&values, &expected, se.as_deref()),
+            error: against(&values, reference),
             times: StageTimes {
                 prepare: prepare.as_secs_f64(),
                 update: median_secs(update),

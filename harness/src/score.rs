@@ -3,6 +3,8 @@
 use glam::Vec3;
 use serde::Serialize;
 
+use crate::reference::VertexReference;
+
 /// How far a method's values are from the reference's, over a domain (all
 /// vertices of a frame, or all covered pixels).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -24,6 +26,18 @@ pub struct ErrorStats {
 /// elements in near-total shadow (|r| → 0) do not turn a tiny absolute error
 /// into an enormous relative one; 1% of the domain's RMS radiance.
 pub const FLOOR: f32 = 0.01;
+
+/// Scores per-vertex radiance `values` (all objects, flattened) against a
+/// vertex reference, its standard errors included.
+pub fn against(values: &[Vec3], reference: &VertexReference) -> ErrorStats {
+    let expected: Vec<Vec3> = reference.radiance.flat().collect();
+    let se: Option<Vec<Vec3>> = reference
+        .radiance
+        .std_error
+        .as_ref()
+        .map(|s| s.iter().flatten().copied().collect());
+    compare(values, &expected, se.as_deref())
+}
 
 /// Compares `values` with `reference` element by element; `std_error` is the
 /// reference's standard error per element, if known.

@@ -17,18 +17,6 @@ fn frames(scene: &Scene) -> Vec<FrameGeometry> {
         .collect()
 }
 
-/// Volume enclosed by a closed mesh (divergence theorem); positive when its
-/// faces wind outward.
-fn signed_volume(mesh: &Mesh) -> f32 {
-    mesh.triangles()
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| mesh.positions()[i as usize]);
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
-}
-
 /// Every triangle of the pose has area, and its counter-clockwise face normal
 /// agrees with its vertices' normals (so the winding is consistent).
 fn assert_faces_valid(mesh: &Mesh, what: &str) {
@@ -160,7 +148,7 @@ fn chess_pieces_are_closed_and_stand_on_the_board_or_hop_over_it() {
         assert_relative_eq!(g.objects[1].bounds().min.y, top);
         let posed = &g.objects[2..];
         for (i, p) in posed.iter().enumerate() {
-            assert!(signed_volume(p) > 0.0, "piece {i} winds inward");
+            assert!(p.signed_volume() > 0.0, "piece {i} winds inward");
             let b = p.bounds();
             assert!(
                 b.min.y >= top - 1e-6,

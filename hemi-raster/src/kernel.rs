@@ -39,7 +39,7 @@
 use std::ops::Range;
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::{Mat3, Vec3};
 use shadow_core::{Error, Result};
 
 use crate::lut::{PlaneLut, plane_code};
@@ -320,16 +320,32 @@ struct Job<'a, W: MaskRow> {
     candidates: &'a Candidates<'a>,
 }
 
-/// The receiver's origin and the rows of world-to-tangent.
+/// The receiver's origin and the rows of world-to-tangent, with what the
+/// box test needs of them computed once per receiver.
 #[derive(Clone, Copy)]
 struct Frame {
     o: Vec3,
     t: Vec3,
     b: Vec3,
     n: Vec3,
+    /// |n| componentwise, and Σ|o|: the box test's reach and rounding scale.
+    n_abs: Vec3,
+    o_scale: f32,
 }
 
 impl Frame {
+    fn new(o: Vec3, to_world: Mat3) -> Frame {
+        let n = to_world.z_axis;
+        Frame {
+            o,
+            t: to_world.x_axis,
+            b: to_world.y_axis,
+            n,
+            n_abs: n.abs(),
+            o_scale: o.abs().element_sum(),
+        }
+    }
+
     /// World point (x, y, z) in tangent coordinates: the arithmetic of
     /// [`TangentFrame::to_local`], term for term.
     #[inline(always)]
@@ -347,8 +363,8 @@ impl Frame {
     /// a margin far above the rounding of [`Frame::local`] (module docs).
     #[inline(always)]
     fn below(&self, centre: Vec3, half: Vec3) -> bool {
-        let top = self.n.dot(centre - self.o) + self.n.abs().dot(half);
-        let scale = self.o.abs().element_sum() + centre.abs().element_sum() + half.element_sum();
+        let top = self.n.dot(centre - self.o) + self.n_abs.dot(half);
+        let scale = self.o_scale + centre.abs().element_sum() + half.element_sum();
         top < -1e-5 * scale
     }
 }
@@ -369,12 +385,7 @@ impl<W: MaskRow> Job<'_, W> {
     #[inline(always)]
     fn run(&self, scratch: &mut Scratch) -> Mask<W> {
         let m = self.frame.to_world();
-        let frame = Frame {
-            o: self.frame.origin(),
-            t: m.x_axis,
-            b: m.y_axis,
-            n: m.z_axis,
-        };
+        let frame = Frame::new(self.frame.origin(), m);
         let resolution = self.lut.resolution() as u32;
         let start = scratch.profile.is_some().then(Instant::now);
         let Scratch { survivors, profile } = scratch;
@@ -756,12 +767,10 @@ mod tests {
     /// a floor-level sphere looking up, the floor's boxes are all below.
     #[test]
     fn boxes_below_the_tangent_plane_are_found() {
-        let frame = Frame {
-            o: Vec3::new(0.0, 1.0, 0.0),
-            t: Vec3::X,
-            b: Vec3::NEG_Z,
-            n: Vec3::Y,
-        };
+        let frame = Frame::new(
+            Vec3::new(0.0, 1.0, 0.0),
+            Mat3::from_cols(Vec3::X, Vec3::NEG_Z, Vec3::Y),
+        );
         assert!(frame.below(Vec3::ZERO, Vec3::new(5.0, 0.5, 5.0)));
         assert!(!frame.below(Vec3::ZERO, Vec3::new(5.0, 1.0, 5.0)));
         assert!(!frame.below(Vec3::new(0.0, 2.0, 0.0), Vec3::splat(0.1)));

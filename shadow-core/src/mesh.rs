@@ -215,6 +215,19 @@ impl Mesh {
         self.report
     }
 
+    /// The volume a closed mesh encloses (divergence theorem: the sum of
+    /// the tetrahedra from the origin to each face), positive when its faces
+    /// wind outward. Meaningless for an open mesh.
+    pub fn signed_volume(&self) -> f32 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.positions[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
     pub fn bounds(&self) -> Aabb {
         Aabb::from_points(self.positions.iter().copied())
     }

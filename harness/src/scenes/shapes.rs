@@ -217,18 +217,6 @@ mod tests {
         }
     }
 
-    /// Volume enclosed by a closed mesh (divergence theorem): positive when
-    /// every face winds outward.
-    fn signed_volume(m: &Mesh) -> f32 {
-        m.triangles()
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| m.positions()[i as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum()
-    }
-
     #[test]
     fn lathe_of_a_rectangle_is_a_closed_outward_prism() {
         let profile = [
@@ -244,7 +232,7 @@ mod tests {
         assert_eq!(m.report().degenerate_triangles, 0);
         // A regular 12-gon prism: area (n/2) r² sin(2π/n), height 2.
         let area = 6.0 * 0.25 * (TAU / 12.0).sin();
-        assert_relative_eq!(signed_volume(&m), area * 2.0, epsilon = 1e-5);
+        assert_relative_eq!(m.signed_volume(), area * 2.0, epsilon = 1e-5);
         let b = m.bounds();
         assert_relative_eq!(b.min.y, 1.0);
         assert_relative_eq!(b.max.y, 3.0);
@@ -265,7 +253,7 @@ mod tests {
         assert!(m.is_closed());
         // Outer cylinder minus the bowl, to within the polygon's area loss.
         let expected = std::f32::consts::PI * (1.0 - 0.25 * 0.5);
-        assert_relative_eq!(signed_volume(&m), expected, max_relative = 0.01);
+        assert_relative_eq!(m.signed_volume(), expected, max_relative = 0.01);
         // The bowl's floor faces up.
         let floor_normal = m.normals()[m.vertex_count() - 1];
         assert_relative_eq!(floor_normal, Vec3::Y, epsilon = 1e-5);
