@@ -3,7 +3,8 @@
 //! - Table 1 (criterion, per scene): one animation frame of `hemi-raster`
 //!   (the frame's posed geometry, visibility, SH integration and shading),
 //!   cycling through the scene's frames, with the two-level hierarchy and
-//!   flat, on every SIMD path the CPU runs; and the skinning of the human
+//!   flat, each with and without potentially visible sets built from the
+//!   scene's frames (§3.2), on every SIMD path the CPU runs; and the skinning of the human
 //!   (glTF joints and morphs to posed vertices), which a renderer adds per
 //!   frame.
 //! - Table 2 (printed before the measurements): where one update's time goes
@@ -17,7 +18,7 @@
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::gltf::GltfAsset;
 use harness::scenes;
-use hemi_raster::{Config, HemiRaster, Hierarchy, Simd};
+use hemi_raster::{Config, HemiRaster, Hierarchy, Pvs, Simd};
 use shadow_core::{Scene, ShadowMethod};
 
 /// The paper's three scene kinds that we have: cloth, a skinned character
@@ -35,21 +36,27 @@ fn scenes() -> Vec<Scene> {
 fn configs() -> Vec<(String, Config)> {
     let mut out = Vec::new();
     for simd in Simd::available().into_iter().rev() {
+        for (label, pvs) in [("two-level", Pvs::Off), ("two-level+pvs", Pvs::EVERY_FRAME)] {
+            out.push((
+                format!("{label}/{simd:?}"),
+                Config {
+                    simd,
+                    pvs,
+                    ..Config::default()
+                },
+            ));
+        }
+    }
+    for (label, pvs) in [("flat", Pvs::Off), ("flat+pvs", Pvs::EVERY_FRAME)] {
         out.push((
-            format!("two-level/{simd:?}"),
+            format!("{label}/Auto"),
             Config {
-                simd,
+                hierarchy: Hierarchy::Flat,
+                pvs,
                 ..Config::default()
             },
         ));
     }
-    out.push((
-        "flat/Auto".to_string(),
-        Config {
-            hierarchy: Hierarchy::Flat,
-            ..Config::default()
-        },
-    ));
     out
 }
 
@@ -74,12 +81,15 @@ fn print_split() {
     );
     for scene in scenes() {
         let frame = scene.frame_geometry(0).expect("frame 0");
-        for (label, hierarchy) in [
-            ("two-level", Hierarchy::default()),
-            ("flat", Hierarchy::Flat),
+        for (label, hierarchy, pvs) in [
+            ("two-level", Hierarchy::default(), Pvs::Off),
+            ("two-l.+pvs", Hierarchy::default(), Pvs::EVERY_FRAME),
+            ("flat", Hierarchy::Flat, Pvs::Off),
+            ("flat+pvs", Hierarchy::Flat, Pvs::EVERY_FRAME),
         ] {
             let mut method = HemiRaster::new(Config {
                 hierarchy,
+                pvs,
                 ..Config::default()
             });
             method.prepare(&scene).expect("prepare");

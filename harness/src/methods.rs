@@ -19,6 +19,10 @@ pub const METHODS: &[(&str, &str)] = &[
         "the same without the hierarchy: every triangle blocks every vertex (what the hierarchy costs in error)",
     ),
     (
+        "hemi-raster:pvs",
+        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2): the same masks on those frames, from far fewer blockers",
+    ),
+    (
         "raytrace:N",
         "Monte-Carlo ray tracing, N MIS iterations per vertex (e.g. raytrace:16)",
     ),
@@ -29,6 +33,7 @@ pub const REPORT_METHODS: &[&str] = &[
     "unshadowed",
     "hemi-raster",
     "hemi-raster:flat",
+    "hemi-raster:pvs",
     "raytrace:4",
     "raytrace:16",
     "raytrace:64",
@@ -48,6 +53,13 @@ pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
     if name == "hemi-raster:flat" {
         let config = hemi_raster::Config {
             hierarchy: hemi_raster::Hierarchy::Flat,
+            ..hemi_raster::Config::default()
+        };
+        return Ok(Box::new(hemi_raster::HemiRaster::new(config)));
+    }
+    if name == "hemi-raster:pvs" {
+        let config = hemi_raster::Config {
+            pvs: hemi_raster::Pvs::EVERY_FRAME,
             ..hemi_raster::Config::default()
         };
         return Ok(Box::new(hemi_raster::HemiRaster::new(config)));
@@ -82,6 +94,10 @@ mod tests {
         assert_eq!(
             by_name("hemi-raster:flat").unwrap().name(),
             "hemi-raster-flat"
+        );
+        assert_eq!(
+            by_name("hemi-raster:pvs").unwrap().name(),
+            "hemi-raster-pvs"
         );
         assert!(by_name("raytrace:1").is_err());
         let unknown = by_name("nonesuch").err().map(|e| e.to_string());

@@ -127,12 +127,35 @@ impl Default for Hierarchy {
     }
 }
 
+/// Potentially visible sets (§3.2, "PVS"): per vertex, the blocker
+/// triangles that showed in frames known beforehand.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Pvs {
+    /// Every candidate of the hierarchy, every frame.
+    #[default]
+    Off,
+    /// A static set per vertex, built by `prepare` from frames 0, `stride`,
+    /// 2·`stride`, … of the scene's animation (the paper's offline
+    /// preprocess). On those frames the masks are exactly those without
+    /// sets; on other poses a blocker hidden in all of them is missed
+    /// (`pvs` module docs), so the frames should be as dense as the poses
+    /// the sets will serve.
+    Animation { stride: NonZeroU32 },
+}
+
+impl Pvs {
+    /// Sets built from every frame of the animation.
+    pub const EVERY_FRAME: Pvs = Pvs::Animation {
+        stride: NonZeroU32::MIN,
+    };
+}
+
 /// Settings of [`crate::HemiRaster`].
 ///
 /// The default is the paper's setup (§3.1.1, §3.2): a 32×32 mask, a
 /// 6×128×128 plane table, 25-term SH (order 5: bands 0–4) integrated from the
 /// 4×4-block downsample, back faces culled on closed meshes, the two-level
-/// mesh hierarchy, and the widest SIMD path the running CPU has.
+/// mesh hierarchy without PVS, and the widest SIMD path the running CPU has.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Config {
     pub mask_resolution: MaskResolution,
@@ -145,6 +168,7 @@ pub struct Config {
     pub integration: Integration,
     pub backface_culling: BackfaceCulling,
     pub hierarchy: Hierarchy,
+    pub pvs: Pvs,
     /// Which compilation of the per-receiver loop runs; `Auto` detects the
     /// CPU's widest.
     pub simd: Simd,
@@ -159,6 +183,7 @@ impl Default for Config {
             integration: Integration::ShBlocks,
             backface_culling: BackfaceCulling::Auto,
             hierarchy: Hierarchy::default(),
+            pvs: Pvs::Off,
             simd: Simd::Auto,
         }
     }

@@ -65,7 +65,7 @@ use rayon::prelude::*;
 use shadow_core::{Adjacency, Error, Mesh, Result, Scene};
 
 use crate::config::NearRings;
-use crate::kernel::{Candidates, Corners};
+use crate::kernel::{Candidates, Corners, Entry};
 use crate::rasterize::Blockers;
 
 /// The static part of the hierarchy of a scene: coarse meshes and, per
@@ -81,10 +81,10 @@ pub(crate) struct TwoLevel {
     coarse_objects: Vec<Range<usize>>,
     /// Per global vertex: its object.
     vertex_object: Vec<u32>,
-    /// Per global vertex (CSR): its near full-resolution triangles, as slots
-    /// of the frame's fine [`Corners`].
+    /// Per global vertex (CSR): its near full-resolution triangles, as
+    /// entries of the frame's fine [`Corners`].
     near_offsets: Vec<u32>,
-    near: Vec<u32>,
+    near: Vec<Entry>,
 }
 
 /// One object's share of the hierarchy, in its own indices.
@@ -97,9 +97,11 @@ struct ObjectLevels {
 
 impl TwoLevel {
     /// Simplifies every object to max(triangles / `divisor`,
-    /// `min_triangles`) triangles and gathers the per-vertex lists.
+    /// `min_triangles`) triangles and gathers the per-vertex lists; `cull`
+    /// says per object whether its back faces are culled.
     pub(crate) fn new(
         scene: &Scene,
+        cull: &[bool],
         divisor: u32,
         min_triangles: u32,
         rings: NearRings,
@@ -123,7 +125,10 @@ impl TwoLevel {
                 .extend(levels.coarse.iter().map(|t| t.map(|i| i + vertex_base)));
             h.coarse_objects.push(coarse_base..h.coarse_triangles.len());
             for near in levels.near {
-                h.near.extend(near.iter().map(|t| t + slot_bases[o]));
+                h.near.extend(
+                    near.iter()
+                        .map(|t| Entry::new(t + slot_bases[o], cull[o], false)),
+                );
                 h.near_offsets.push(h.near.len() as u32);
                 h.vertex_object.push(o as u32);
             }

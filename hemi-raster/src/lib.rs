@@ -7,6 +7,7 @@ mod kernel;
 mod lut;
 mod mask;
 mod method;
+mod pvs;
 mod rasterize;
 mod transfer;
 
@@ -15,7 +16,7 @@ mod properties;
 #[cfg(test)]
 mod test_util;
 
-pub use config::{BackfaceCulling, Config, Hierarchy, MaskResolution, NearRings};
+pub use config::{BackfaceCulling, Config, Hierarchy, MaskResolution, NearRings, Pvs};
 pub use disk::{BLOCK, DiskGrid};
 pub use kernel::Simd;
 pub use lut::PlaneLut;

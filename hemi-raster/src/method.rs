@@ -12,10 +12,11 @@ use shadow_core::{
     ShadowMethod, VertexRadiance,
 };
 
-use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution};
+use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution, Pvs};
 use crate::hierarchy::TwoLevel;
 use crate::kernel::{Candidates, Corners, Scratch, Simd, receiver_mask};
 use crate::mask::{Mask, MaskRow};
+use crate::pvs::VisibleSets;
 use crate::rasterize::{Blockers, Rasterizer};
 use crate::transfer::{
     Integration, LobeGrid, PhongLobe, direct_glossy, direct_irradiance, glossy_transfer,
@@ -85,6 +86,8 @@ struct Prepared {
     vertex_counts: Vec<usize>,
     /// The coarse meshes and per-vertex blocker lists, unless flat.
     hierarchy: Option<TwoLevel>,
+    /// Per-vertex potentially visible sets, with [`Pvs::Animation`].
+    visible: Option<VisibleSets>,
 }
 
 /// Where one [`HemiRaster::profile_update`] spent its time, on one thread:
@@ -165,24 +168,19 @@ impl<W: MaskRow> Pipeline<W> {
         &mut self,
         blockers: &Blockers,
         hierarchy: Option<&TwoLevel>,
+        visible: Option<&VisibleSets>,
         profile: Option<&mut UpdateProfile>,
     ) {
         let fine = Corners::new(blockers, &blockers.triangles, blockers.objects.clone());
-        let levels = hierarchy.map(|h| (h, h.corners(blockers)));
+        let coarse = hierarchy.map(|h| h.corners(blockers));
         let (lut, simd) = (self.raster.lut(), self.simd);
-        let candidates = |v: usize| match &levels {
-            Some((h, coarse)) => h.candidates(coarse, &fine, v),
-            None => Candidates::All(&fine),
+        let candidates = |v: usize| match (visible, hierarchy, &coarse) {
+            (Some(sets), _, coarse) => sets.candidates(coarse.as_ref(), &fine, v),
+            (None, Some(h), Some(coarse)) => h.candidates(coarse, &fine, v),
+            _ => Candidates::All(&fine),
         };
         let mask = |scratch: &mut Scratch, v: usize| {
-            receiver_mask(
-                simd,
-                lut,
-                blockers,
-                &blockers.frame(v),
-                &candidates(v),
-                scratch,
-            )
+            receiver_mask(simd, lut, &blockers.frame(v), &candidates(v), scratch)
         };
         let receivers = 0..blockers.vertex_count();
         self.masks = match profile {
@@ -377,8 +375,8 @@ impl HemiRaster {
             .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
         let start = Instant::now();
         let blockers = Blockers::new(frame, &prepared.cull);
-        let hierarchy = prepared.hierarchy.as_ref();
-        with_pipeline!(engine, p => p.rasterize(&blockers, hierarchy, profile.as_deref_mut()));
+        let (hierarchy, visible) = (prepared.hierarchy.as_ref(), prepared.visible.as_ref());
+        with_pipeline!(engine, p => p.rasterize(&blockers, hierarchy, visible, profile.as_deref_mut()));
         let visibility = start.elapsed();
         let order = self.config.order;
         match self.config.integration {
@@ -441,9 +439,11 @@ impl ShadowMethod for HemiRaster {
     /// `hemi-raster`, or `hemi-raster-flat` without the mesh hierarchy, so
     /// that reports tell the two apart.
     fn name(&self) -> &str {
-        match self.config.hierarchy {
-            Hierarchy::Flat => "hemi-raster-flat",
-            Hierarchy::TwoLevel { .. } => NAME,
+        match (self.config.hierarchy, self.config.pvs) {
+            (Hierarchy::Flat, Pvs::Off) => "hemi-raster-flat",
+            (Hierarchy::Flat, Pvs::Animation { .. }) => "hemi-raster-flat-pvs",
+            (Hierarchy::TwoLevel { .. }, Pvs::Off) => NAME,
+            (Hierarchy::TwoLevel { .. }, Pvs::Animation { .. }) => "hemi-raster-pvs",
         }
     }
 
@@ -470,7 +470,7 @@ impl ShadowMethod for HemiRaster {
         if self.engine.is_none() {
             self.engine = Some(Engine::new(&self.config)?);
         }
-        let cull = scene
+        let cull: Vec<bool> = scene
             .objects()
             .iter()
             .map(|o| match self.config.backface_culling {
@@ -488,11 +488,27 @@ impl ShadowMethod for HemiRaster {
                 near_reach,
             } => Some(TwoLevel::new(
                 scene,
+                &cull,
                 coarse_divisor.get(),
                 min_coarse_triangles,
                 near,
                 near_reach,
             )?),
+        };
+        let visible = match self.config.pvs {
+            Pvs::Off => None,
+            Pvs::Animation { stride } => {
+                let frames = (0..scene.frames().len())
+                    .step_by(stride.get() as usize)
+                    .map(|i| scene.frame_geometry(i));
+                let engine = self
+                    .engine
+                    .as_ref()
+                    .ok_or_else(|| Error::stage(NAME, "no plane table"))?;
+                Some(with_pipeline!(engine, p => {
+                    VisibleSets::build(&p.raster, frames, &cull, hierarchy.as_ref())
+                })?)
+            }
         };
         self.scene = Some(Prepared {
             materials: scene.objects().iter().map(|o| o.material).collect(),
@@ -503,6 +519,7 @@ impl ShadowMethod for HemiRaster {
                 .map(|o| o.mesh.vertex_count())
                 .collect(),
             hierarchy,
+            visible,
         });
         self.frame = None;
         self.blockers = None;
