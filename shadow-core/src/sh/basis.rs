@@ -100,6 +100,60 @@ impl Legendre {
         }
     }
 
+    /// [`Legendre::column`] for `L` values of y at once, writing
+    /// Y_l^{±m} = N_l^m · (c, s) into `out` (just N_l^0 for m = 0). Plain
+    /// loops, no closure: inlined whole into the caller's instruction set.
+    #[inline(always)]
+    fn column_lanes<const L: usize>(
+        &self,
+        bands: usize,
+        m: usize,
+        y: &[f32; L],
+        c: &[f32; L],
+        s: &[f32; L],
+        out: &mut [[f32; L]],
+    ) {
+        #[inline(always)]
+        fn emit<const L: usize>(
+            l: usize,
+            m: usize,
+            p: &[f32; L],
+            c: &[f32; L],
+            s: &[f32; L],
+            out: &mut [[f32; L]],
+        ) {
+            let centre = l * l + l;
+            if m == 0 {
+                out[centre] = *p;
+                return;
+            }
+            for k in 0..L {
+                out[centre + m][k] = p[k] * c[k];
+                out[centre - m][k] = p[k] * s[k];
+            }
+        }
+        let mut p0 = [self.diag[m]; L];
+        emit(m, m, &p0, c, s, out);
+        if m + 1 >= bands {
+            return;
+        }
+        let mut p1 = [0.0f32; L];
+        for k in 0..L {
+            p1[k] = self.next[m] * y[k] * p0[k];
+        }
+        emit(m + 1, m, &p1, c, s, out);
+        for l in m + 2..bands {
+            let (a, b) = (self.a[tri(l, m)], self.b[tri(l, m)]);
+            let mut p2 = [0.0f32; L];
+            for k in 0..L {
+                p2[k] = a * (y[k] * p1[k] - b * p0[k]);
+            }
+            emit(l, m, &p2, c, s, out);
+            p0 = p1;
+            p1 = p2;
+        }
+    }
+
     /// N_m^m (with the √2 of m > 0).
     pub(super) fn diag(&self, m: usize) -> f32 {
         self.diag[m]
@@ -139,6 +193,34 @@ pub fn eval_basis(order: ShOrder, dir: Vec3, out: &mut [f32]) {
     }
 }
 
+/// [`eval_basis`] for `L` directions at once, given by their coordinates
+/// `x`, `y`, `z` (unit length): `out[i][lane]` = Y_i(direction `lane`).
+/// The same operations in the same order as [`eval_basis`], lane by lane,
+/// so the values are the same to the bit; written as fixed-width loops over
+/// the lanes, which the compiler turns into SIMD instructions (inline it
+/// into a `#[target_feature]` function for wider ones than the build's).
+///
+/// # Panics
+/// If `out` is shorter than `order.coeff_count()`.
+#[inline(always)]
+pub fn eval_basis_lanes<const L: usize>(
+    order: ShOrder,
+    [x, y, z]: [&[f32; L]; 3],
+    out: &mut [[f32; L]],
+) {
+    let bands = order.bands();
+    let out = &mut out[..order.coeff_count()];
+    let t = Legendre::get();
+    let (mut c, mut s) = ([1.0f32; L], [0.0f32; L]);
+    t.column_lanes(bands, 0, y, &c, &s, out);
+    for m in 1..bands {
+        for k in 0..L {
+            (c[k], s[k]) = (x[k] * c[k] - z[k] * s[k], x[k] * s[k] + z[k] * c[k]);
+        }
+        t.column_lanes(bands, m, y, &c, &s, out);
+    }
+}
+
 /// Σ_i c_i Y_i(`dir`) for a coefficient vector of any element type
 /// (f32 or RGB), through a stack buffer.
 pub(super) fn eval_sum<T>(order: ShOrder, coeffs: &[T], dir: Vec3) -> T
@@ -161,6 +243,29 @@ mod tests {
     use approx::assert_relative_eq;
     use proptest::prelude::*;
     use std::f32::consts::PI;
+
+    /// The lanes version gives [`eval_basis`]'s values to the bit.
+    #[test]
+    fn lanes_match_single_evaluation() {
+        let dirs = random_dirs(40);
+        for order in [1, 2, 5, 9, 16] {
+            let order = ShOrder::new(order).unwrap();
+            for batch in dirs.chunks_exact(8) {
+                let coordinate = |axis: usize| std::array::from_fn(|k| batch[k][axis]);
+                let (x, y, z): ([f32; 8], [f32; 8], [f32; 8]) =
+                    (coordinate(0), coordinate(1), coordinate(2));
+                let mut lanes = [[0.0f32; 8]; crate::sh::MAX_COEFFS];
+                eval_basis_lanes(order, [&x, &y, &z], &mut lanes);
+                for (k, &dir) in batch.iter().enumerate() {
+                    let mut one = [0.0f32; crate::sh::MAX_COEFFS];
+                    eval_basis(order, dir, &mut one);
+                    for i in 0..order.coeff_count() {
+                        assert_eq!(lanes[i][k].to_bits(), one[i].to_bits(), "{order}, {i}");
+                    }
+                }
+            }
+        }
+    }
 
     fn random_dirs(count: usize) -> Vec<Vec3> {
         // A deterministic spread: a Fibonacci spiral, plus the poles and the

@@ -39,7 +39,8 @@
 //!
 //! # What is here
 //!
-//! - evaluation: [`eval_basis`] (allocation-free, no trigonometry),
+//! - evaluation: [`eval_basis`] (allocation-free, no trigonometry; and
+//!   [`eval_basis_lanes`], many directions at once in SIMD lanes),
 //! - projection: [`project_environment`] (the exact projection of a lat-long
 //!   map), [`project_fn`] and [`project_fn_rgb`] (Gauss–Legendre quadrature of
 //!   any function, exact for band-limited ones),
@@ -62,7 +63,7 @@ use std::fmt;
 
 use serde::Serialize;
 
-pub use basis::eval_basis;
+pub use basis::{eval_basis, eval_basis_lanes};
 pub use projection::{project_environment, project_fn, project_fn_rgb};
 pub use rgb::ShRgb;
 pub use rotation::ShRotation;
