@@ -222,17 +222,28 @@ impl Corners {
         })
     }
 
-    /// The corner columns of the triangles at `entries`' slots, NaN
-    /// (culled) past the end.
+    /// Reads the triangles at `entries`' slots (at most [`LANES`]) into
+    /// `columns` and their culling into `flags`; lanes past the end get NaN
+    /// corners, which every test culls.
     #[inline(always)]
-    fn gather(&self, entries: &[Entry]) -> [[f32; LANES]; 9] {
-        let mut columns = [[f32::NAN; LANES]; 9];
-        for (k, column) in columns.iter_mut().enumerate() {
-            for (value, entry) in column.iter_mut().zip(entries) {
-                *value = self.corners[k][entry.slot()];
+    fn gather(&self, entries: &[Entry], columns: &mut [[f32; LANES]; 9], flags: &mut LaneFlags) {
+        // Columns cut to one length: the nine bounds checks of a lane fold
+        // into one.
+        let n = self.slots();
+        let corners: [&[f32]; 9] = std::array::from_fn(|k| &self.corners[k][..n]);
+        for (l, entry) in entries.iter().enumerate() {
+            let slot = entry.slot();
+            for k in 0..9 {
+                columns[k][l] = corners[k][slot];
+            }
+            flags.cull[l] = entry.cull();
+            flags.chords[l] = entry.chords();
+        }
+        for l in entries.len()..LANES {
+            for column in columns.iter_mut() {
+                column[l] = f32::NAN;
             }
         }
-        columns
     }
 
     /// The world-space corners of the triangle at `slot`.
@@ -304,16 +315,6 @@ impl LaneFlags {
             cull: [cull; LANES],
             chords: [chords; LANES],
         }
-    }
-
-    #[inline(always)]
-    fn of(entries: &[Entry]) -> LaneFlags {
-        let mut flags = LaneFlags::splat(false, false);
-        for (l, entry) in entries.iter().enumerate() {
-            flags.cull[l] = entry.cull();
-            flags.chords[l] = entry.chords();
-        }
-        flags
     }
 }
 
@@ -662,10 +663,11 @@ fn listed(
     survivors: &mut [u32],
     count: &mut usize,
 ) {
+    let mut columns = [[0.0f32; LANES]; 9];
+    let mut flags = LaneFlags::splat(false, false);
     for entries in entries.chunks(LANES) {
-        let columns = corners.gather(entries);
+        corners.gather(entries, &mut columns, &mut flags);
         let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
-        let flags = LaneFlags::of(entries);
         setup(c, &flags, frame, resolution, survivors, count);
     }
 }
