@@ -42,7 +42,7 @@ use std::time::{Duration, Instant};
 use glam::{Mat3, Vec3};
 use shadow_core::{Error, Result};
 
-use crate::lut::{PlaneLut, plane_code};
+use crate::lut::{PlaneLut, plane_code, row_code};
 use crate::mask::{Mask, MaskRow};
 use crate::rasterize::{Blockers, TangentFrame, edge_planes, is_near_chord};
 
@@ -534,7 +534,7 @@ impl<W: MaskRow> Job<'_, W> {
                         if !corners.below(chunk, &frame) {
                             let c = corners.chunk(chunk);
                             let flags = LaneFlags::splat(g.cull, false);
-                            setup(c, &flags, &frame, resolution, survivors, &mut count);
+                            setup::<W>(c, &flags, &frame, resolution, survivors, &mut count);
                         }
                     }
                 }
@@ -550,17 +550,17 @@ impl<W: MaskRow> Job<'_, W> {
                         if !coarse.below(chunk, &frame) {
                             let c = coarse.chunk(chunk);
                             let flags = LaneFlags::splat(g.cull, o == own);
-                            setup(c, &flags, &frame, resolution, survivors, &mut count);
+                            setup::<W>(c, &flags, &frame, resolution, survivors, &mut count);
                         }
                     }
                 }
                 // Near triangles are read by slot; their boxes would not
                 // cull them.
-                listed(fine, near, &frame, resolution, survivors, &mut count);
+                listed::<W>(fine, near, &frame, resolution, survivors, &mut count);
             }
             Candidates::Listed(lists) => {
                 for (corners, entries) in lists {
-                    listed(corners, entries, &frame, resolution, survivors, &mut count);
+                    listed::<W>(corners, entries, &frame, resolution, survivors, &mut count);
                 }
             }
         }
@@ -578,32 +578,29 @@ impl<W: MaskRow> Job<'_, W> {
     /// Phase 2: per surviving triangle, AND its three plane masks and OR
     /// the result into `mask`. A plane mask is a stored mask, mirrored top to
     /// bottom (with folded rows, by reading the two halves of storage
-    /// swapped) and complemented within the disk as its code says (see
-    /// [`PlaneLut`]). The complement is taken against all ones here, which
-    /// also sets the pixels outside the disk, so the mask is clipped to the
-    /// disk once at the end rather than per triangle.
+    /// swapped) and complemented within the disk as its [`row_code`] says
+    /// (see [`PlaneLut`]). The complement is taken against all ones here,
+    /// which also sets the pixels outside the disk, so the mask is clipped to
+    /// the disk once at the end rather than per triangle.
     #[inline(always)]
     fn lookup(&self, survivors: &[u32], mask: &mut Mask<W>) {
         let half = W::RESOLUTION / 2;
+        let rows = self.lut.rows();
         let mut acc = W::EMPTY_ROWS;
         let (top, bottom) = acc.as_mut().split_at_mut(half);
         for (n, s) in survivors.chunks_exact(3).enumerate() {
             if let Some(ahead) = survivors.get(3 * (n + AHEAD)..3 * (n + AHEAD) + 3) {
                 for &code in ahead {
-                    prefetch(self.lut.mask((code >> 2) as usize));
+                    let start = (code >> 1) as usize & !(W::RESOLUTION - 1);
+                    prefetch(&rows[start..start + W::RESOLUTION]);
                 }
             }
             let plane = |k: usize| {
                 let code = s[k];
-                let rows = self.lut.mask((code >> 2) as usize).rows();
-                let (first, second) = rows.split_at(half);
-                let (top, bottom) = if code & 2 != 0 {
-                    (second, first)
-                } else {
-                    (first, second)
-                };
+                let top = (code >> 1) as usize;
+                let bottom = top ^ half;
                 let flip = if code & 1 != 0 { !W::ZERO } else { W::ZERO };
-                (&top[..half], &bottom[..half], flip)
+                (&rows[top..top + half], &rows[bottom..bottom + half], flip)
             };
             let ((a0, a1, fa), (b0, b1, fb), (c0, c1, fc)) = (plane(0), plane(1), plane(2));
             for i in 0..half {
@@ -631,12 +628,12 @@ const AHEAD: usize = 16;
 
 /// Asks for `value`'s cache lines; never faults.
 #[inline(always)]
-fn prefetch<T>(value: &T) {
+fn prefetch<T>(value: &[T]) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        let p = (value as *const T).cast::<i8>();
-        for offset in (0..size_of::<T>()).step_by(64) {
+        let p = value.as_ptr().cast::<i8>();
+        for offset in (0..size_of_val(value)).step_by(64) {
             // SAFETY: a prefetch is a hint; it reads nothing and never faults.
             unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(offset)) };
         }
@@ -655,7 +652,7 @@ fn fit(survivors: &mut Vec<u32>, slots: usize) {
 
 /// Phase 1 on listed triangles, 16 at a time, read by slot from `corners`.
 #[inline(always)]
-fn listed(
+fn listed<W: MaskRow>(
     corners: &Corners,
     entries: &[Entry],
     frame: &Frame,
@@ -668,7 +665,7 @@ fn listed(
     for entries in entries.chunks(LANES) {
         corners.gather(entries, &mut columns, &mut flags);
         let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
-        setup(c, &flags, frame, resolution, survivors, count);
+        setup::<W>(c, &flags, frame, resolution, survivors, count);
     }
 }
 
@@ -678,7 +675,7 @@ fn listed(
 /// Straight-line code over fixed-size arrays: the compiler turns the first
 /// loop into SIMD instructions, 16 triangles per pass.
 #[inline(always)]
-fn setup(
+fn setup<W: MaskRow>(
     c: [&[f32; LANES]; 9],
     flags: &LaneFlags,
     frame: &Frame,
@@ -734,7 +731,7 @@ fn setup(
     for (e, codes) in codes.iter_mut().enumerate() {
         for (l, code) in codes.iter_mut().enumerate() {
             let m = Vec3::new(planes[3 * e][l], planes[3 * e + 1][l], planes[3 * e + 2][l]);
-            *code = plane_code(m, resolution);
+            *code = row_code::<W>(plane_code(m, resolution));
         }
     }
     // Compaction, survivor by survivor.

@@ -42,7 +42,9 @@ const MAX_BYTES: usize = 1 << 30;
 pub struct PlaneLut<W: MaskRow> {
     resolution: usize,
     disk: Mask<W>,
-    masks: Vec<Mask<W>>,
+    /// The stored masks' rows, one mask after another, each in the folded
+    /// order of [`Mask::storage_row`].
+    rows: Vec<W>,
     build_time: Duration,
 }
 
@@ -73,20 +75,24 @@ impl<W: MaskRow> PlaneLut<W> {
             .map(|(r, c)| (r, c, grid.direction(r, c)))
             .collect();
         let n = resolution as u32;
-        let mut masks = vec![Mask::EMPTY; 3 * resolution * resolution / 2];
-        masks.par_iter_mut().enumerate().for_each(|(index, mask)| {
-            let (face, i, j) = stored_cell(index as u32, n);
-            let m = cell_normal(face as usize, i as usize, j as usize, resolution);
-            for &(r, c, d) in &pixels {
-                if m.dot(d) > 0.0 {
-                    mask.set(r, c);
+        let mut rows = vec![W::ZERO; 3 * resolution * resolution / 2 * W::RESOLUTION];
+        rows.par_chunks_exact_mut(W::RESOLUTION)
+            .enumerate()
+            .for_each(|(index, rows)| {
+                let (face, i, j) = stored_cell(index as u32, n);
+                let m = cell_normal(face as usize, i as usize, j as usize, resolution);
+                let mut mask = Mask::<W>::EMPTY;
+                for &(r, c, d) in &pixels {
+                    if m.dot(d) > 0.0 {
+                        mask.set(r, c);
+                    }
                 }
-            }
-        });
+                rows.copy_from_slice(mask.rows());
+            });
         Ok(PlaneLut {
             resolution,
             disk: *grid.disk(),
-            masks,
+            rows,
             build_time: start.elapsed(),
         })
     }
@@ -103,7 +109,7 @@ impl<W: MaskRow> PlaneLut<W> {
 
     /// Memory held by the masks, in bytes.
     pub fn bytes(&self) -> usize {
-        self.masks.len() * std::mem::size_of::<Mask<W>>()
+        std::mem::size_of_val(self.rows.as_slice())
     }
 
     /// The disk pixels on the positive side of the plane through the origin
@@ -114,11 +120,15 @@ impl<W: MaskRow> PlaneLut<W> {
             return Mask::EMPTY;
         }
         let code = plane_code(m, self.resolution as u32);
-        let stored = self.mask((code >> 2) as usize);
+        let mut stored = Mask::EMPTY;
+        let index = (code >> 2) as usize * W::RESOLUTION;
+        stored
+            .rows_mut()
+            .copy_from_slice(&self.rows[index..index + W::RESOLUTION]);
         let mirrored = if code & 2 != 0 {
             stored.mirrored()
         } else {
-            *stored
+            stored
         };
         if code & 1 != 0 {
             self.disk.and_not(&mirrored)
@@ -127,10 +137,11 @@ impl<W: MaskRow> PlaneLut<W> {
         }
     }
 
-    /// Stored mask `index` (a [`plane_code`] shifted right by two).
+    /// The rows of every stored mask, one after another: mask `index` (a
+    /// [`plane_code`] shifted right by two) is at `index · RESOLUTION`.
     #[inline(always)]
-    pub(crate) fn mask(&self, index: usize) -> &Mask<W> {
-        &self.masks[index]
+    pub(crate) fn rows(&self) -> &[W] {
+        &self.rows
     }
 
     /// The disk pixels.
@@ -182,6 +193,18 @@ pub(crate) fn plane_code(m: Vec3, resolution: u32) -> u32 {
     let (i, j) = if below { (last - i, last - j) } else { (i, j) };
     let index = stored_index(face, i, j, resolution);
     (index << 2) | (u32::from(mirror) << 1) | u32::from(negated ^ below)
+}
+
+/// A [`plane_code`] as the per-receiver loop looks it up:
+/// `top << 1 | complement`, `top` being where in [`PlaneLut::rows`] the
+/// `R/2` stored rows of the mask's top half start. Its bottom half starts at
+/// `top ^ R/2`: a mask's rows start at a multiple of R, and the mirror swaps
+/// its two halves of storage ([`Mask::storage_row`]).
+#[inline(always)]
+pub(crate) fn row_code<W: MaskRow>(code: u32) -> u32 {
+    let rows = W::RESOLUTION as u32;
+    let top = (code >> 2) * rows + ((code >> 1) & 1) * (rows / 2);
+    (top << 1) | (code & 1)
 }
 
 /// The storage index of positive-face cell (`face`, i, j) that a normal in
