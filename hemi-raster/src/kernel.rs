@@ -116,6 +116,10 @@ fn avx512_feature(name: &str) -> bool {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Corners {
     corners: [Vec<f32>; 9],
+    /// The same corners by triangle (slot), for reading listed triangles:
+    /// one bounds check and one or two cache lines per triangle, where the
+    /// columns take nine of each.
+    by_slot: Vec<[f32; 9]>,
     /// Per chunk: the world bounding box of its corners (centre, half size).
     boxes: Vec<(Vec3, Vec3)>,
     /// Real (unpadded) triangles.
@@ -155,11 +159,13 @@ impl Corners {
         for column in &mut self.corners {
             column.resize(padded, f32::NAN);
         }
+        self.by_slot.resize(padded, [f32::NAN; 9]);
         for (slot, t) in (start..).zip(triangles) {
             for (k, &i) in t.iter().enumerate() {
                 let p = blockers.position(i as usize);
                 for axis in 0..3 {
                     self.corners[3 * k + axis][slot] = p[axis];
+                    self.by_slot[slot][3 * k + axis] = p[axis];
                 }
             }
         }
@@ -227,14 +233,10 @@ impl Corners {
     /// corners, which every test culls.
     #[inline(always)]
     fn gather(&self, entries: &[Entry], columns: &mut [[f32; LANES]; 9], flags: &mut LaneFlags) {
-        // Columns cut to one length: the nine bounds checks of a lane fold
-        // into one.
-        let n = self.slots();
-        let corners: [&[f32]; 9] = std::array::from_fn(|k| &self.corners[k][..n]);
         for (l, entry) in entries.iter().enumerate() {
-            let slot = entry.slot();
+            let corners = &self.by_slot[entry.slot()];
             for k in 0..9 {
-                columns[k][l] = corners[k][slot];
+                columns[k][l] = corners[k];
             }
             flags.cull[l] = entry.cull();
             flags.chords[l] = entry.chords();
@@ -248,8 +250,8 @@ impl Corners {
 
     /// The world-space corners of the triangle at `slot`.
     pub(crate) fn triangle(&self, slot: usize) -> [Vec3; 3] {
-        let c = &self.corners;
-        [0, 3, 6].map(|k| Vec3::new(c[k][slot], c[k + 1][slot], c[k + 2][slot]))
+        let c = &self.by_slot[slot];
+        [0, 3, 6].map(|k| Vec3::new(c[k], c[k + 1], c[k + 2]))
     }
 
     /// Every triangle's entry (padding included, which every test culls):
