@@ -215,6 +215,20 @@ impl TransferScore {
         std_error: Option<&[f32]>,
         coeffs: usize,
     ) -> Result<()> {
+        self.add_each(values, reference, std_error, coeffs, |_, _| ())
+    }
+
+    /// [`TransferScore::add`], also handing `each` every vertex's index and
+    /// relative error (`None` for a dark vertex), as the per-vertex mean
+    /// counts it.
+    pub fn add_each(
+        &mut self,
+        values: &[f32],
+        reference: &[f32],
+        std_error: Option<&[f32]>,
+        coeffs: usize,
+        mut each: impl FnMut(usize, Option<f64>),
+    ) -> Result<()> {
         let order = ShOrder::from_coeff_count(coeffs).filter(|_| {
             values.len() == reference.len()
                 && reference.len().is_multiple_of(coeffs)
@@ -250,9 +264,12 @@ impl TransferScore {
             let length = r_sq.sqrt();
             if length < dark {
                 self.dark += 1;
+                each(v, None);
             } else {
-                self.relative_sum += d_sq.sqrt() / length;
+                let relative = d_sq.sqrt() / length;
+                self.relative_sum += relative;
                 self.noise_relative_sum += s_sq.sqrt() / length;
+                each(v, Some(relative));
             }
         }
         Ok(())
@@ -276,6 +293,102 @@ impl TransferScore {
             noise_global: ratio(self.noise_sq),
             count: self.vertices,
             dark: self.dark,
+        }
+    }
+}
+
+/// Where a configuration's per-vertex transfer error sits: per mesh, and how
+/// concentrated it is. A defect that breaks a class of vertices (a crease, a
+/// contact) shows as a few vertex-frames holding much of the sum; quadrature
+/// error spreads evenly.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ErrorBreakdown {
+    /// Per mesh name (objects that share a mesh, such as the chess pieces of
+    /// one shape, pooled), largest share first.
+    pub meshes: Vec<MeshError>,
+    /// The share of the sum of per-vertex errors held by the worst
+    /// [`WORST_FRACTION`] of the vertex-frames that are not dark.
+    pub worst_share: f32,
+}
+
+/// One mesh's part of an [`ErrorBreakdown`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeshError {
+    pub name: String,
+    /// Vertex-frames scored (dark ones left out).
+    pub count: usize,
+    /// Their mean relative error.
+    pub per_vertex: f32,
+    /// Their share of the sum of per-vertex errors over the scene.
+    pub share: f32,
+}
+
+/// The fraction of vertex-frames whose share of the error
+/// [`ErrorBreakdown::worst_share`] reports.
+pub const WORST_FRACTION: f64 = 0.05;
+
+/// Collects the per-vertex errors of [`TransferScore::add_each`] by mesh.
+#[derive(Clone, Debug)]
+pub struct BreakdownBuilder {
+    names: Vec<String>,
+    /// Per flat vertex (objects one after another): its index in `names`.
+    mesh_of: Vec<usize>,
+    /// Per name: vertex-frames and the sum of their errors.
+    sums: Vec<(usize, f64)>,
+    errors: Vec<f64>,
+}
+
+impl BreakdownBuilder {
+    pub fn new(scene: &Scene) -> BreakdownBuilder {
+        let mut names: Vec<String> = Vec::new();
+        let mut mesh_of = Vec::with_capacity(scene.vertex_count());
+        for object in scene.objects() {
+            let name = object.mesh.name();
+            let index = names.iter().position(|n| n == name).unwrap_or_else(|| {
+                names.push(name.to_string());
+                names.len() - 1
+            });
+            mesh_of.extend(std::iter::repeat_n(index, object.mesh.vertex_count()));
+        }
+        BreakdownBuilder {
+            sums: vec![(0, 0.0); names.len()],
+            names,
+            mesh_of,
+            errors: Vec::new(),
+        }
+    }
+
+    /// Flat vertex `v` of a frame has relative error `error` (`None`: dark).
+    pub fn add(&mut self, v: usize, error: Option<f64>) {
+        if let (Some(e), Some(&mesh)) = (error, self.mesh_of.get(v)) {
+            let (count, sum) = &mut self.sums[mesh];
+            *count += 1;
+            *sum += e;
+            self.errors.push(e);
+        }
+    }
+
+    pub fn finish(mut self) -> ErrorBreakdown {
+        let total: f64 = self.errors.iter().sum();
+        let share = |x: f64| if total > 0.0 { (x / total) as f32 } else { 0.0 };
+        let mut meshes: Vec<MeshError> = self
+            .names
+            .into_iter()
+            .zip(&self.sums)
+            .filter(|(_, (count, _))| *count > 0)
+            .map(|(name, &(count, sum))| MeshError {
+                name,
+                count,
+                per_vertex: (sum / count as f64) as f32,
+                share: share(sum),
+            })
+            .collect();
+        meshes.sort_by(|a, b| b.share.total_cmp(&a.share));
+        self.errors.sort_by(|a, b| b.total_cmp(a));
+        let worst = (self.errors.len() as f64 * WORST_FRACTION).ceil() as usize;
+        ErrorBreakdown {
+            meshes,
+            worst_share: share(self.errors[..worst].iter().sum()),
         }
     }
 }
@@ -315,6 +428,8 @@ pub struct Row {
     /// `None` where there is no transfer vector to score (direct integration,
     /// the reference itself).
     pub transfer: Option<TransferError>,
+    /// Where the transfer error sits, for the configurations that have one.
+    pub breakdown: Option<ErrorBreakdown>,
     pub radiance: RadianceError,
     /// Median over frames of the update + shade time, milliseconds; `None`
     /// for the bounds, which are not methods.
@@ -503,6 +618,7 @@ impl Bounds {
             name: "unshadowed".into(),
             what: "clamped cosine only, no visibility: the upper bound".into(),
             transfer: Some(score.summary()),
+            breakdown: None,
             radiance: RadianceError::over_frames(&errors),
             frame_ms: None,
         })
@@ -522,6 +638,7 @@ impl Bounds {
                 self.lambert.order()
             ),
             transfer: None,
+            breakdown: None,
             radiance: RadianceError::over_frames(&errors),
             frame_ms: None,
         }
@@ -547,6 +664,7 @@ fn run_variant(
     let n = variant.config.order.coeff_count();
     let has_transfer = variant.config.integration != Integration::Direct;
     let mut score = TransferScore::default();
+    let mut breakdown = BreakdownBuilder::new(scene);
     let mut errors = Vec::new();
     let mut frame_seconds = Vec::new();
     let mut transfer = Vec::new();
@@ -579,13 +697,20 @@ fn run_variant(
                     transfer.extend_from_slice(t);
                 }
             }
-            score.add(&transfer, reference.mean(), Some(reference.std_error()), n)?;
+            score.add_each(
+                &transfer,
+                reference.mean(),
+                Some(reference.std_error()),
+                n,
+                |v, error| breakdown.add(v, error),
+            )?;
         }
     }
     Ok(Row {
         name: variant.name.to_string(),
         what: variant.what.to_string(),
         transfer: has_transfer.then(|| score.summary()),
+        breakdown: has_transfer.then(|| breakdown.finish()),
         radiance: RadianceError::over_frames(&errors),
         frame_ms: Some(median(frame_seconds) * 1e3),
     })
@@ -699,9 +824,95 @@ impl SceneAccuracy {
         for row in &self.rows {
             let _ = writeln!(s, "- {}: {}", row.name, row.what);
         }
+        let broken_down: Vec<_> = self
+            .rows
+            .iter()
+            .filter_map(|row| Some((&row.name, row.breakdown.as_ref()?)))
+            .collect();
+        if !broken_down.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nWhere the per-vertex transfer error sits: per mesh, its mean and (in \
+                 parentheses) its share of the sum over vertices and frames; then the share \
+                 that the worst {:.0}% of vertex-frames hold.\n",
+                WORST_FRACTION * 100.0
+            );
+        }
+        for (name, b) in broken_down {
+            let meshes: Vec<String> = b
+                .meshes
+                .iter()
+                .map(|m| {
+                    format!(
+                        "{} {:.2}% ({:.0}%)",
+                        m.name,
+                        m.per_vertex * 100.0,
+                        m.share * 100.0
+                    )
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "- {name}: {}; worst {:.0}%: {:.0}%",
+                meshes.join(", "),
+                WORST_FRACTION * 100.0,
+                b.worst_share * 100.0
+            );
+        }
         for (name, why) in &self.skipped {
             let _ = writeln!(s, "- {name}: not run: {why}");
         }
         let _ = writeln!(s);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use approx::assert_relative_eq;
+    use shadow_core::{Camera, Object};
+
+    use super::*;
+    use crate::scenes::{shapes, white};
+
+    /// Objects sharing a mesh are pooled under its name, dark vertices are
+    /// left out, and the worst 5% share is of the non-dark sum.
+    #[test]
+    fn breakdown_pools_meshes_and_measures_concentration() {
+        let grid = Arc::new(shapes::floor("tile", Vec3::ZERO, 1.0, 1).unwrap());
+        let other = Arc::new(shapes::floor("slab", Vec3::Y, 1.0, 1).unwrap());
+        let objects = [&grid, &other, &grid]
+            .map(|mesh| Object {
+                mesh: Arc::clone(mesh),
+                material: white(),
+            })
+            .to_vec();
+        let camera = Camera::framing(Vec3::ZERO, 2.0, Vec3::ONE, 8, 8).unwrap();
+        let scene = Scene::still("tiles", objects, camera).unwrap();
+        assert_eq!(scene.vertex_count(), 12);
+        let mut b = BreakdownBuilder::new(&scene);
+        // Tiles (vertices 0–3 and 8–11): one dark vertex, the others 1%,
+        // but for one at 37%. Slab (4–7): 10% each.
+        for v in 0..12 {
+            let error = match v {
+                0 => None,
+                4..=7 => Some(0.1),
+                9 => Some(0.37),
+                _ => Some(0.01),
+            };
+            b.add(v, error);
+        }
+        let e = b.finish();
+        let total = 0.37 + 0.4 + 6.0 * 0.01;
+        assert_eq!(e.meshes.len(), 2);
+        let (tile, slab) = (&e.meshes[0], &e.meshes[1]);
+        assert_eq!((tile.name.as_str(), tile.count), ("tile", 7));
+        assert_eq!((slab.name.as_str(), slab.count), ("slab", 4));
+        assert_relative_eq!(tile.per_vertex, (0.37 + 0.06) / 7.0, epsilon = 1e-6);
+        assert_relative_eq!(tile.share, 0.43 / total, epsilon = 1e-6);
+        assert_relative_eq!(slab.share, 0.4 / total, epsilon = 1e-6);
+        // 5% of 11 vertex-frames, rounded up: the single worst.
+        assert_relative_eq!(e.worst_share, 0.37 / total, epsilon = 1e-6);
     }
 }

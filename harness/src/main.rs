@@ -94,6 +94,10 @@ enum Command {
         /// Timed runs of update and shade per frame; medians are reported.
         #[arg(long, default_value_t = 1)]
         repeats: usize,
+        /// Only these configurations (comma separated, e.g.
+        /// `default,flat,sh-pixels`); default every one.
+        #[arg(long = "variant", value_delimiter = ',')]
+        variants: Vec<String>,
     },
 }
 
@@ -344,6 +348,7 @@ fn main() -> Result<()> {
             transfer_rays,
             transfer_replicates,
             repeats,
+            variants: wanted,
         } => {
             let names: Vec<&str> = if chosen.is_empty() {
                 accuracy::DEFAULT_SCENES
@@ -354,14 +359,25 @@ fn main() -> Result<()> {
             } else {
                 chosen.iter().map(String::as_str).collect()
             };
+            let all = accuracy::variants();
+            if let Some(unknown) = wanted.iter().find(|w| !all.iter().any(|v| v.name == *w)) {
+                let known: Vec<&str> = all.iter().map(|v| v.name).collect();
+                bail!(
+                    "no configuration {unknown:?}; there are {}",
+                    known.join(", ")
+                );
+            }
             let plan = Plan {
                 transfer: TransferSettings {
                     replicate_size: transfer_rays,
                     replicates: transfer_replicates,
                     ..TransferSettings::CONVERGED
                 },
+                variants: all
+                    .into_iter()
+                    .filter(|v| wanted.is_empty() || wanted.iter().any(|w| w == v.name))
+                    .collect(),
                 repeats,
-                ..Plan::default()
             };
             let mut report = AccuracyReport {
                 machine: MachineInfo::detect(None),

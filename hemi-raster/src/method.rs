@@ -20,7 +20,7 @@ use crate::pvs::VisibleSets;
 use crate::rasterize::{Blockers, Rasterizer};
 use crate::transfer::{
     Integration, LobeGrid, PhongLobe, direct_glossy, direct_irradiance, glossy_transfer,
-    pixel_angle, sh_transfer,
+    pixel_angle, sh_transfer_on,
 };
 
 const NAME: &str = "hemi-raster";
@@ -215,7 +215,8 @@ impl<W: MaskRow> Pipeline<W> {
             .zip(self.masks.par_iter())
             .enumerate()
             .for_each(|(v, (out, mask))| {
-                sh_transfer(grid, mask, &blockers.frame(v), lambert, blocks, out)
+                let frame = blockers.frame(v);
+                sh_transfer_on(self.simd, grid, mask, &frame, lambert, blocks, out)
             });
     }
 
