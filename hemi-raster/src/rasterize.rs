@@ -14,17 +14,26 @@
 //! a triangle straddling the horizon covers exactly the directions toward its
 //! part above the tangent plane, without clipping. Tests check both claims.
 //!
-//! # Triangles through the receiver
-//! A triangle that contains the receiver (its one-ring triangles, or another
-//! vertex at the same place, as on a UV seam) has det = 0: it subtends zero
-//! solid angle from the vertex, so skipping it is exact. The Monte-Carlo
-//! reference offsets ray origins by a tiny ε along the normal, which makes
-//! such triangles cover a sliver of order ε: the two agree in the limit.
-//! Triangles with |det| ≤ 10⁻⁶·|a||b||c| (seen exactly edge-on, or touching
-//! the receiver) are skipped on the same grounds. A triangle through the
-//! receiver's own vertex has a corner at exactly (0, 0, 0) in its frame
-//! (the same float subtracted from itself), hence det = 0: no index test is
-//! needed.
+//! # The receiver: the vertex, lifted
+//! A receiver looks from its vertex lifted along the normal by the frame's
+//! ray offset ([`Aabb::ray_offset`](shadow_core::Aabb::ray_offset), 10⁻⁴ of
+//! the scene's diagonal), the point the Monte-Carlo reference shoots its
+//! rays from. From the vertex itself the faces that meet there would
+//! subtend no solid angle (they pass through it), and at a concave crease,
+//! where the averaged normal tilts the hemisphere into the object, the
+//! directions into those faces would see through the solid: its inner
+//! walls are back faces, culled. From the lifted point the faces meeting at
+//! a concave crease rise above the tangent plane and block, as they do for
+//! any point of the surface beside the vertex; at convex and flat vertices
+//! they lie below it and are culled as before. On the harness's chess
+//! scene (lathed pieces whose profiles fold inward) this took the transfer
+//! error from 4.5% to 1.8%: a ring of pawn vertices had 71% alone. It also
+//! settles vertices lying a few µm behind another part's surface (the
+//! human's seams) and foot rims touching the board the way the reference
+//! does.
+//!
+//! Triangles with |det| ≤ 10⁻⁶·|a||b||c| (seen exactly edge-on, or through
+//! the receiver) subtend no solid angle and are skipped.
 //!
 //! # Back-face culling
 //! det > 0 means the receiver is behind the triangle's plane (the
@@ -206,6 +215,11 @@ pub(crate) struct Blockers {
     pub(crate) triangles: Vec<[u32; 3]>,
     /// Per object: its triangles' range and whether its back faces are culled.
     pub(crate) objects: Vec<(Range<usize>, bool)>,
+    /// How far each receiver sits above its vertex, along its normal: the
+    /// frame's [`Aabb::ray_offset`](shadow_core::Aabb::ray_offset), the
+    /// Monte-Carlo reference's, so that both look from the same point
+    /// (module docs, "Triangles through the receiver").
+    lift: f32,
 }
 
 impl Blockers {
@@ -220,6 +234,7 @@ impl Blockers {
             normals: Vec::with_capacity(total),
             triangles: Vec::new(),
             objects: Vec::with_capacity(frame.objects.len()),
+            lift: frame.bounds().ray_offset(),
         };
         for (object, &cull) in frame.objects.iter().zip(cull) {
             let base = b.x.len() as u32;
@@ -248,9 +263,14 @@ impl Blockers {
         Vec3::new(self.x[i], self.y[i], self.z[i])
     }
 
-    /// The tangent frame of vertex `v` (a global index).
+    /// The tangent frame of the receiver at vertex `v` (a global index):
+    /// the vertex lifted along its normal by the frame's ray offset.
     pub(crate) fn frame(&self, v: usize) -> TangentFrame {
-        TangentFrame::new(Vec3::new(self.x[v], self.y[v], self.z[v]), self.normals[v])
+        let n = self.normals[v];
+        TangentFrame::new(
+            Vec3::new(self.x[v], self.y[v], self.z[v]) + self.lift * n,
+            n,
+        )
     }
 }
 

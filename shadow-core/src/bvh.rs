@@ -79,12 +79,10 @@ impl SceneBvh {
         self.bounds
     }
 
-    /// The offset that lifts shadow-ray origins off their surface: 10⁻⁴ of the
-    /// scene's bounding-box diagonal. Large enough that a ray never re-hits the
-    /// triangles through its own origin at f32 precision, small enough (0.1 mm on
-    /// a 1 m scene) not to leak light through contacts.
+    /// The offset that lifts shadow-ray origins off their surface
+    /// ([`Aabb::ray_offset`] of the frame's bounds).
     pub fn ray_offset(&self) -> f32 {
-        1e-4 * self.bounds.diagonal().max(f32::MIN_POSITIVE)
+        self.bounds.ray_offset()
     }
 
     /// True when the ray from `origin` in unit direction `dir` hits nothing with

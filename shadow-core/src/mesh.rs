@@ -54,6 +54,18 @@ impl Aabb {
     pub fn diagonal(&self) -> f32 {
         self.extent().length()
     }
+
+    /// How far a point on a surface of a scene with these bounds is lifted
+    /// along its normal before it looks for blockers: 10⁻⁴ of the diagonal.
+    /// Large enough that a shadow ray never re-hits the triangles through
+    /// its own origin at f32 precision, small enough (0.1 mm on a 1 m scene)
+    /// not to leak light through contacts. Every method that looks from a
+    /// vertex (the Monte-Carlo reference, hemi-raster's receivers) lifts by
+    /// this, so that all see from the same point: at a concave crease the
+    /// faces that meet there do block part of the lifted point's hemisphere.
+    pub fn ray_offset(&self) -> f32 {
+        1e-4 * self.diagonal().max(f32::MIN_POSITIVE)
+    }
 }
 
 /// What validation changed while building a [`Mesh`], for reports and logs.
