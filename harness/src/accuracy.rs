@@ -14,10 +14,10 @@
 //! order, whose radiance error is the floor that SH truncation sets under
 //! that environment: no order-5 transfer method can do better.
 
-use std::{f32::consts::FRAC_1_PI, fmt::Write, path::Path, time::Instant};
+use std::{f32::consts::FRAC_1_PI, fmt::Write, num::NonZeroU32, path::Path, time::Instant};
 
 use glam::Vec3;
-use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution};
+use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution, Pvs};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shadow_core::{
@@ -80,6 +80,24 @@ pub fn variants() -> Vec<Variant> {
             "two-level, small objects simplified too (at least 40 coarse triangles, not 300)",
             Config {
                 hierarchy: paper.hierarchy.with_min_coarse_triangles(40),
+                ..paper
+            },
+        ),
+        with(
+            "pvs",
+            "two-level with potentially visible sets built from the scored frames (§3.2): the same masks, so the same error",
+            Config {
+                pvs: Pvs::EVERY_FRAME,
+                ..paper
+            },
+        ),
+        with(
+            "pvs-half",
+            "two-level with sets built from every other frame: half the scored frames unseen by the sets",
+            Config {
+                pvs: Pvs::Animation {
+                    stride: NonZeroU32::new(2).expect("2 is not zero"),
+                },
                 ..paper
             },
         ),
