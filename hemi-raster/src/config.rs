@@ -68,17 +68,21 @@ pub enum Hierarchy {
     /// max(triangles / `coarse_divisor`, `min_coarse_triangles`) triangles;
     /// objects that would not shrink are used whole, exactly as in
     /// [`Hierarchy::Flat`]. Near and coarse triangles overlap, which the OR
-    /// of the mask absorbs; only coarse triangles through the receiver are
-    /// skipped.
+    /// of the mask absorbs. Coarse triangles of the receiver's body (its
+    /// object and the parts touching it) that pass too close to it are
+    /// dropped per frame and replaced by the fine triangles they stand for
+    /// (see the `hierarchy` module docs).
     TwoLevel {
         coarse_divisor: NonZeroU32,
         min_coarse_triangles: u32,
         near: NearRings,
-        /// Also near: the fine triangles that come within `near_reach` ×
-        /// the object's mean coarse-triangle radius of the receiver in the
-        /// rest pose, wherever they are on the surface (the paper's §4.1
-        /// "Accuracy of Local Geometry": eyes in their sockets, arms against
-        /// the body). 0 keeps the rings only.
+        /// Also near: the fine triangles of the receiver's body that come
+        /// within `near_reach` × their object's mean coarse-triangle radius
+        /// of it in the scene's first frame, wherever they are on the
+        /// surface (the paper's §4.1 "Accuracy of Local Geometry": eyes in
+        /// their sockets, arms against the body); objects touching within
+        /// that reach form one body. 0 keeps the rings (and the fine
+        /// triangles of the coarse triangles too close to the receiver).
         near_reach: u8,
     },
 }

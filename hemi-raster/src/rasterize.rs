@@ -92,20 +92,35 @@ pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> EdgePl
     }
 }
 
-/// Whether a coarse triangle of the receiver's own object, seen from behind
-/// (`behind`), passes within its own size of the receiver: the chord of a
-/// fold that the fine surface, not the coarse one, bends around (see
-/// [`crate::Hierarchy::TwoLevel`] and the `hierarchy` module docs). Tested
-/// per frame, so it follows deformation: the centroid of (a, b, c), in the
-/// receiver's tangent frame, is closer than twice the triangle's radius.
+/// Whether coarse triangle (a, b, c) of the receiver's body (its object and
+/// the parts touching it), given in tangent coordinates, is too close to
+/// stand for the fine surface it approximates (§3.2; see the `hierarchy`
+/// module docs), either because
+///
+/// - it is seen from behind (`behind`) with its centroid closer than twice
+///   its radius: the chord of a fold that the fine surface, not the coarse
+///   one, bends around; or
+/// - the receiver lies inside its envelope
+///   ([`in_envelope`](crate::hierarchy::in_envelope) with
+///   [`ENVELOPE`](crate::hierarchy::ENVELOPE)): close to its plane compared
+///   with its size, where its direction errs by as much as the triangle
+///   spans. The hierarchy lists the fine triangles such a coarse triangle
+///   stands for among the receiver's near triangles, so dropping it leaves
+///   no hole.
+///
+/// Tested per frame, so it follows deformation; branch-free, so that the
+/// per-receiver loop evaluates it 16 triangles at a time.
 #[inline(always)]
-pub(crate) fn is_near_chord([a, b, c]: [Vec3; 3], behind: bool) -> bool {
+pub(crate) fn is_near_chord(triangle: [Vec3; 3], behind: bool) -> bool {
+    use crate::hierarchy::{ENVELOPE, in_envelope};
+    let [a, b, c] = triangle;
     let centroid = (a + b + c) * (1.0 / 3.0);
     let radius2 = (a - centroid)
         .length_squared()
         .max((b - centroid).length_squared())
         .max((c - centroid).length_squared());
-    behind & (centroid.length_squared() < 4.0 * radius2)
+    let chord = behind & (centroid.length_squared() < 4.0 * radius2);
+    chord | in_envelope(triangle, ENVELOPE)
 }
 
 /// A receiver's tangent frame: origin at the vertex, z along its normal.
