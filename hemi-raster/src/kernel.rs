@@ -7,8 +7,8 @@
 //!    receiver's frame and culling them), 16 triangles at a time with no
 //!    per-triangle branch: the three corners go into the tangent frame, the
 //!    triangle is culled below the horizon, through the receiver, as a back
-//!    face or as a near chord of the receiver's own object (see
-//!    [`is_near_chord`]), the three edge-plane normals are computed and
+//!    face or as a near chord of the receiver's own body (its object, or
+//!    the touching parts it belongs to; see [`is_near_chord`]), the three edge-plane normals are computed and
 //!    turned into plane-table cells (skipped when the whole chunk is
 //!    culled), and the survivors' cells are appended to a list.
 //! 2. **Lookup** (the paper's "rasterization"): per survivor, the three plane
@@ -274,7 +274,7 @@ impl Corners {
 
 /// A triangle of a per-receiver list: its slot in a frame's [`Corners`],
 /// and how it is culled (back faces; near chords of the receiver's own
-/// object, [`is_near_chord`]), packed in one word.
+/// body, [`is_near_chord`]), packed in one word.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub(crate) struct Entry(u32);
 
@@ -324,8 +324,9 @@ impl LaneFlags {
 pub(crate) enum Candidates<'a> {
     /// Every triangle of the frame.
     All(&'a Corners),
-    /// §3.2's two levels: the coarse triangles of every object but the
-    /// receiver's own (`own`) near chords ([`is_near_chord`]), and the near
+    /// §3.2's two levels: the coarse triangles of every body (group of
+    /// `coarse`) but the near chords of the receiver's own (group `own`,
+    /// [`is_near_chord`]), and the near
     /// fine triangles, given by their slots in `fine` (all the frame's
     /// triangles, as [`Candidates::All`] has them).
     TwoLevel {
@@ -710,7 +711,7 @@ fn setup<W: MaskRow>(
         behind[l] = e.behind;
     }
     // The chord test only where a lane asks for it (the receiver's own
-    // coarse object): most chunks skip it.
+    // coarse body): most chunks skip it.
     let mut chords = false;
     for &c in &flags.chords {
         chords |= c;

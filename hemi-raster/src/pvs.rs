@@ -24,7 +24,7 @@
 //! The sets are over the same candidates as the configured hierarchy: the
 //! coarse and near triangles of [`crate::Hierarchy::TwoLevel`] or every
 //! triangle of [`crate::Hierarchy::Flat`], with the same culling rules (back
-//! faces, own-object near chords, tested per frame).
+//! faces, own-body near chords, tested per frame).
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
