@@ -260,25 +260,21 @@ mod tests {
         method
     }
 
-    /// Every vertex's transfer vector, all objects.
+    /// `value(object, vertex)` of every vertex, all objects, concatenated.
+    fn per_vertex<T: Clone>(scene: &Scene, value: impl Fn(usize, usize) -> Vec<T>) -> Vec<T> {
+        let objects = scene.objects().iter().enumerate();
+        objects
+            .flat_map(|(o, object)| (0..object.mesh.vertex_count()).map(move |v| (o, v)))
+            .flat_map(|(o, v)| value(o, v))
+            .collect()
+    }
+
     fn transfers(method: &HemiRaster, scene: &Scene) -> Vec<f32> {
-        let mut out = Vec::new();
-        for (o, object) in scene.objects().iter().enumerate() {
-            for v in 0..object.mesh.vertex_count() {
-                out.extend_from_slice(method.transfer(o, v).unwrap());
-            }
-        }
-        out
+        per_vertex(scene, |o, v| method.transfer(o, v).unwrap().to_vec())
     }
 
     fn blocked(method: &HemiRaster, scene: &Scene) -> Vec<f32> {
-        let mut out = Vec::new();
-        for (o, object) in scene.objects().iter().enumerate() {
-            for v in 0..object.mesh.vertex_count() {
-                out.push(method.blocked_fraction(o, v).unwrap());
-            }
-        }
-        out
+        per_vertex(scene, |o, v| vec![method.blocked_fraction(o, v).unwrap()])
     }
 
     /// On the frames it was built from, the sets change no mask: the
