@@ -254,17 +254,8 @@ impl Corners {
         [0, 3, 6].map(|k| Vec3::new(c[k], c[k + 1], c[k + 2]))
     }
 
-    /// Every triangle's entry (padding included, which every test culls):
-    /// what [`Candidates::All`] rasterizes.
-    pub(crate) fn entries(&self) -> impl Iterator<Item = Entry> + '_ {
-        self.objects.iter().flat_map(|g| {
-            let slots = g.chunks.start * LANES..g.chunks.end * LANES;
-            slots.map(|slot| Entry::new(slot as u32, g.cull, false))
-        })
-    }
-
-    /// The entries of object `o`'s triangles, with near chords culled when
-    /// `chords`.
+    /// The entries of group `o`'s triangles (padding included, which every
+    /// test culls), with near chords culled when `chords`.
     fn object_entries(&self, o: usize, chords: bool) -> impl Iterator<Item = Entry> + '_ {
         let g = &self.objects[o];
         let slots = g.chunks.start * LANES..g.chunks.end * LANES;
@@ -355,7 +346,10 @@ impl Candidates<'_> {
     /// considers, for building visible sets (not for the loop itself).
     pub(crate) fn entries(&self) -> Vec<(Level, Entry)> {
         match *self {
-            Candidates::All(fine) => fine.entries().map(|e| (Level::Fine, e)).collect(),
+            Candidates::All(fine) => (0..fine.objects.len())
+                .flat_map(|o| fine.object_entries(o, false))
+                .map(|e| (Level::Fine, e))
+                .collect(),
             Candidates::TwoLevel {
                 coarse, own, near, ..
             } => (0..coarse.objects.len())

@@ -47,7 +47,7 @@ pub(crate) struct VisibleSets {
 
 /// Per receiver lists, compressed: receiver v's entries are
 /// `entries[offsets[v]..offsets[v + 1]]`, sorted by slot.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 struct Csr {
     offsets: Vec<u32>,
     entries: Vec<Entry>,
@@ -93,13 +93,14 @@ impl VisibleSets {
                     grow(raster, &blockers, v, &candidates, layouts, set, shown);
                 });
         }
-        let mut out = VisibleSets {
-            coarse: Csr::default(),
-            fine: Csr::default(),
+        let empty = || Csr {
+            offsets: vec![0],
+            entries: Vec::new(),
         };
-        for csr in [&mut out.coarse, &mut out.fine] {
-            csr.offsets.push(0);
-        }
+        let mut out = VisibleSets {
+            coarse: empty(),
+            fine: empty(),
+        };
         for set in sets {
             for (level, entry) in set {
                 match level {

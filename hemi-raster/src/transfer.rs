@@ -240,24 +240,6 @@ impl<const C: usize> BasisSum<C> {
     }
 }
 
-/// Writes the world-space Lambert transfer vector of a vertex with tangent
-/// frame `frame` and visibility `mask` into `out[..order.coeff_count()]`
-/// (without ρ/π). `lambert` must be `Zonal::lambert` of `order`; `blocks`
-/// selects the 4×4 downsample. Allocation-free.
-///
-/// # Panics
-/// If `out` is shorter than the order's coefficient count.
-pub fn sh_transfer<W: MaskRow>(
-    grid: &DiskGrid<W>,
-    mask: &Mask<W>,
-    frame: &TangentFrame,
-    lambert: &Zonal,
-    blocks: bool,
-    out: &mut [f32],
-) {
-    lambert_transfer(grid, mask, frame, lambert, blocks, out);
-}
-
 /// [`sh_transfer`] compiled for the `simd` path (which must come from
 /// [`Simd::resolve`]): the basis evaluation is eight lanes wide, one AVX
 /// register rather than two SSE ones.
@@ -281,18 +263,25 @@ pub(crate) fn sh_transfer_on<W: MaskRow>(
             blocks: bool,
             out: &mut [f32],
         ) {
-            lambert_transfer(grid, mask, frame, lambert, blocks, out);
+            sh_transfer(grid, mask, frame, lambert, blocks, out);
         }
         // SAFETY: `Simd::resolve` only yields these paths on CPUs with AVX2.
         return unsafe { avx2(grid, mask, frame, lambert, blocks, out) };
     }
     let _ = simd;
-    lambert_transfer(grid, mask, frame, lambert, blocks, out);
+    sh_transfer(grid, mask, frame, lambert, blocks, out);
 }
 
-/// The body of [`sh_transfer`], inlined into each compilation.
+/// Writes the world-space Lambert transfer vector of a vertex with tangent
+/// frame `frame` and visibility `mask` into `out[..order.coeff_count()]`
+/// (without ρ/π). `lambert` must be `Zonal::lambert` of `order`; `blocks`
+/// selects the 4×4 downsample. Allocation-free; always inlined, so that the
+/// method's per-instruction-set compilations hold the whole body.
+///
+/// # Panics
+/// If `out` is shorter than the order's coefficient count.
 #[inline(always)]
-fn lambert_transfer<W: MaskRow>(
+pub fn sh_transfer<W: MaskRow>(
     grid: &DiskGrid<W>,
     mask: &Mask<W>,
     frame: &TangentFrame,

@@ -166,38 +166,25 @@ impl Legendre {
 ///
 /// Allocation-free and without trigonometry: sin^m θ (cos mφ, sin mφ) is
 /// (x + i z)^m, the rest a normalized Legendre recurrence in y, about two
-/// multiply-adds per value (≈ 18 ns for order 5, 53 ns for order 9 in a
-/// release build on the 2-core development machine).
+/// multiply-adds per value: the one-lane case of [`eval_basis_lanes`].
 ///
 /// # Panics
 /// If `out` is shorter than `order.coeff_count()`.
 pub fn eval_basis(order: ShOrder, dir: Vec3, out: &mut [f32]) {
-    let bands = order.bands();
     let out = &mut out[..order.coeff_count()];
     debug_assert!(
         (dir.length_squared() - 1.0).abs() < 1e-3,
         "eval_basis needs a unit direction, got {dir}"
     );
-    let t = Legendre::get();
-    let (x, y, z) = (dir.x, dir.y, dir.z);
-    t.column(bands, 0, y, t.diag(0), |l, p| out[l * l + l] = p);
-    // (c, s) = sin^m θ (cos mφ, sin mφ) = (x + i z)^m.
-    let (mut c, mut s) = (1.0f32, 0.0f32);
-    for m in 1..bands {
-        (c, s) = (x * c - z * s, x * s + z * c);
-        t.column(bands, m, y, t.diag(m), |l, p| {
-            let centre = l * l + l;
-            out[centre + m] = p * c;
-            out[centre - m] = p * s;
-        });
-    }
+    let (lanes, _) = out.as_chunks_mut::<1>();
+    eval_basis_lanes(order, [&[dir.x], &[dir.y], &[dir.z]], lanes);
 }
 
 /// [`eval_basis`] for `L` directions at once, given by their coordinates
 /// `x`, `y`, `z` (unit length): `out[i][lane]` = Y_i(direction `lane`).
-/// The same operations in the same order as [`eval_basis`], lane by lane,
-/// so the values are the same to the bit; written as fixed-width loops over
-/// the lanes, which the compiler turns into SIMD instructions (inline it
+/// Every lane goes through the same operations in the same order, so the
+/// values do not depend on the width (tested); written as fixed-width loops
+/// over the lanes, which the compiler turns into SIMD instructions (inline it
 /// into a `#[target_feature]` function for wider ones than the build's).
 ///
 /// # Panics
@@ -211,6 +198,7 @@ pub fn eval_basis_lanes<const L: usize>(
     let bands = order.bands();
     let out = &mut out[..order.coeff_count()];
     let t = Legendre::get();
+    // (c, s) = sin^m θ (cos mφ, sin mφ) = (x + i z)^m.
     let (mut c, mut s) = ([1.0f32; L], [0.0f32; L]);
     t.column_lanes(bands, 0, y, &c, &s, out);
     for m in 1..bands {
