@@ -44,7 +44,8 @@
 //! - projection: [`project_environment`] (the exact projection of a lat-long
 //!   map), [`project_fn`] and [`project_fn_rgb`] (Gauss–Legendre quadrature of
 //!   any function, exact for band-limited ones),
-//! - rotation: [`ShRotation`] (Ivanic and Ruedenberg's recurrence),
+//! - rotation: [`ShRotation`] (Ivanic and Ruedenberg's recurrence) and
+//!   [`EulerShRotation`] (applied without a matrix, for per-vertex frames),
 //! - convolution with zonal kernels: [`Zonal`] (Lambert's clamped cosine and
 //!   the normalized Phong lobe, by the Funk–Hecke theorem),
 //! - [`ShRgb`], an RGB coefficient vector: lighting, evaluated, dotted with a
@@ -66,7 +67,7 @@ use serde::Serialize;
 pub use basis::{eval_basis, eval_basis_lanes};
 pub use projection::{project_environment, project_fn, project_fn_rgb};
 pub use rgb::ShRgb;
-pub use rotation::ShRotation;
+pub use rotation::{EulerShRotation, ShRotation};
 pub use zonal::Zonal;
 
 /// A validated SH order: the number of bands n, 1 ≤ n ≤ [`ShOrder::MAX`],

@@ -139,6 +139,135 @@ impl ShRotation {
     }
 }
 
+/// The SH rotation of any rotation applied in place without building its
+/// matrix: for rotations that change with every use, such as a vertex's
+/// tangent frame, where [`ShRotation`]'s O(n³) build would cost far more
+/// than applying it.
+///
+/// The rotation is split into Euler angles about our polar axis +Y and +X,
+/// R = R_y(α) · R_x(β) · R_y(γ), and the tilt about +X into a turn about
+/// +Y between two fixed quarter turns, R_x(β) = T · R_y(β) · T⁻¹ with
+/// T = R_z(−90°) (T ŷ = x̂). A turn about the polar axis only mixes each
+/// band's pair of coefficients (l, ±m), by the angle m·θ (the basis of
+/// order m is cos mφ and sin mφ), so the SH rotation of R is three such
+/// turns and two products with the fixed blocks of T and T⁻¹ (the
+/// decomposition of Kautz, Sloan and Snyder 2002, "Fast, arbitrary BRDF
+/// shading for low-frequency lighting using spherical harmonics"):
+/// 2 Σ (2l+1)² + O(n²) multiply-adds, about 400 at order 5, and
+/// no trigonometric function (the angles' cosines and sines come from R's
+/// entries, their multiples by the angle-addition recurrence).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EulerShRotation {
+    /// T = R_z(−90°) and its inverse, as SH rotations.
+    quarter: ShRotation,
+    quarter_inverse: ShRotation,
+}
+
+/// The longest band of [`ShOrder::MAX`]: room for one band on the stack.
+const MAX_BAND: usize = 2 * ShOrder::MAX.bands() - 1;
+
+impl EulerShRotation {
+    /// The fixed quarter turns, up to `order`.
+    pub fn new(order: ShOrder) -> EulerShRotation {
+        let t = DMat3::from_rotation_z(-std::f64::consts::FRAC_PI_2);
+        EulerShRotation {
+            quarter: ShRotation::build(order, t),
+            quarter_inverse: ShRotation::build(order, t.transpose()),
+        }
+    }
+
+    pub fn order(&self) -> ShOrder {
+        self.quarter.order
+    }
+
+    /// Rotates `coeffs` in place by the rotation matrix `r` (columns:
+    /// ω ↦ rω), with the semantics of [`ShRotation::apply`]. `r` must be a
+    /// rotation; this is not checked (it is meant for per-vertex use, where
+    /// [`ShRotation::from_mat3`]'s check would be a cost). Allocation-free.
+    ///
+    /// # Panics
+    /// If `coeffs` is not n² long for an order n no higher than this one's.
+    ///
+    /// Always inlined, so that a caller compiled for wider SIMD compiles it
+    /// for the same.
+    #[inline(always)]
+    pub fn apply(&self, r: Mat3, coeffs: &mut [f32]) {
+        let bands = ShOrder::from_coeff_count(coeffs.len())
+            .filter(|o| *o <= self.order())
+            .unwrap_or_else(|| {
+                panic!(
+                    "SH rotation of {} cannot rotate {} coefficients",
+                    self.order(),
+                    coeffs.len()
+                )
+            })
+            .bands();
+        // R ŷ = (sin β sin α, cos β, sin β cos α).
+        let y = r.y_axis;
+        let (sin_a, cos_a) = unit_or_x(y.x, y.z);
+        let (sin_b, cos_b) = unit_or_x((y.x * y.x + y.z * y.z).sqrt(), y.y);
+        // R_y(γ) = R_x(−β) R_y(−α) R, whose x axis is (cos γ, 0, −sin γ):
+        // γ takes up what rounding left in α and β, so R is met to rounding
+        // even at the poles (β near 0 or π), where α is ill-conditioned.
+        let x = r.x_axis;
+        let z1 = sin_a * x.x + cos_a * x.z;
+        let x1 = cos_a * x.x - sin_a * x.z;
+        let (sin_c, cos_c) = unit_or_x(-(-sin_b * x.y + cos_b * z1), x1);
+        polar_turn(coeffs, bands, cos_c, sin_c);
+        band_product(&self.quarter_inverse, coeffs, bands);
+        polar_turn(coeffs, bands, cos_b, sin_b);
+        band_product(&self.quarter, coeffs, bands);
+        polar_turn(coeffs, bands, cos_a, sin_a);
+    }
+}
+
+/// (s, c) / |(s, c)|, or (0, 1) (angle zero) when both vanish.
+#[inline(always)]
+fn unit_or_x(s: f32, c: f32) -> (f32, f32) {
+    let length = (s * s + c * c).sqrt();
+    if length > 0.0 {
+        (s / length, c / length)
+    } else {
+        (0.0, 1.0)
+    }
+}
+
+/// The SH rotation of R_y(θ) (glam's sense: +X toward −Z) on bands
+/// `0..bands` of `coeffs`, given cos θ and sin θ. R_y(θ) carries the
+/// function at azimuth φ + θ to φ (φ runs from +X toward +Z), so the pair
+/// (c, s) of cos mφ and sin mφ becomes (c cos mθ + s sin mθ,
+/// s cos mθ − c sin mθ).
+#[inline(always)]
+fn polar_turn(coeffs: &mut [f32], bands: usize, cos: f32, sin: f32) {
+    let (mut cos_m, mut sin_m) = (1.0f32, 0.0f32);
+    for m in 1..bands {
+        (cos_m, sin_m) = (cos_m * cos - sin_m * sin, sin_m * cos + cos_m * sin);
+        for l in m..bands {
+            let centre = l * l + l;
+            let (c, s) = (coeffs[centre + m], coeffs[centre - m]);
+            coeffs[centre + m] = c * cos_m + s * sin_m;
+            coeffs[centre - m] = s * cos_m - c * sin_m;
+        }
+    }
+}
+
+/// `coeffs` ← `rotation` · `coeffs` on bands `0..bands`, band by band.
+#[inline(always)]
+fn band_product(rotation: &ShRotation, coeffs: &mut [f32], bands: usize) {
+    let mut block_start = 1;
+    for l in 1..bands {
+        let size = 2 * l + 1;
+        let block = &rotation.blocks[block_start..block_start + size * size];
+        let band = &mut coeffs[l * l..l * l + size];
+        let mut src = [0.0f32; MAX_BAND];
+        src[..size].copy_from_slice(band);
+        for (out, row) in band.iter_mut().zip(block.chunks_exact(size)) {
+            *out = row.iter().zip(&src[..size]).map(|(r, c)| r * c).sum();
+        }
+        block_start += size * size;
+    }
+}
+
 /// The block of band `l` from band 1 and the block of band l − 1, by Ivanic
 /// and Ruedenberg's recurrence (1996, Table 2; with the 1998 erratum's fix of
 /// the V term for m = ±1). Indices are centred: −l ≤ m, n ≤ l.
@@ -383,6 +512,61 @@ mod tests {
             for (x, y) in a.blocks.iter().zip(&b.blocks) {
                 prop_assert!((x - y).abs() < 1e-5);
             }
+        }
+    }
+
+    /// The Euler path against the matrix built by the recurrence, on every
+    /// kind of rotation, the poles included (β = 0 or π, where the
+    /// decomposition's α is arbitrary).
+    fn check_euler(order: ShOrder, r: Mat3, seed: u64) {
+        let c = random_coeffs(order, seed);
+        let mut want = vec![0.0; c.len()];
+        ShRotation::from_mat3(order, r)
+            .unwrap()
+            .apply(&c, &mut want);
+        let mut got = c.clone();
+        EulerShRotation::new(order).apply(r, &mut got);
+        for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                (a - b).abs() < 2e-5 * order.get() as f32,
+                "{r}: coefficient {i}: {a} vs {b}"
+            );
+        }
+    }
+
+    #[test]
+    fn euler_rotation_at_the_poles_and_about_each_axis() {
+        let order = ShOrder::new(6).unwrap();
+        for r in [
+            Mat3::IDENTITY,
+            Mat3::from_rotation_y(0.7),
+            Mat3::from_rotation_x(PI),
+            Mat3::from_rotation_x(PI) * Mat3::from_rotation_y(-2.0),
+            Mat3::from_rotation_x(1e-4) * Mat3::from_rotation_y(1.3),
+            Mat3::from_rotation_z(0.9),
+            Mat3::from_rotation_x(-FRAC_PI_2),
+            Mat3::from_rotation_z(PI - 1e-5),
+        ] {
+            check_euler(order, r, 3);
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "cannot rotate 25 coefficients")]
+    fn euler_rotation_above_its_order_panics() {
+        EulerShRotation::new(ShOrder::new(3).unwrap()).apply(Mat3::IDENTITY, &mut [0.0; 25]);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        #[test]
+        fn euler_rotation_equals_the_recurrence(
+            q in arbitrary_rotation(),
+            order in 1u32..=16,
+            seed in any::<u64>(),
+        ) {
+            check_euler(ShOrder::new(order).unwrap(), Mat3::from_quat(q), seed);
         }
     }
 
