@@ -48,7 +48,8 @@ pub struct Variant {
     pub config: Config,
 }
 
-/// The paper's configuration, then each option changed alone.
+/// The default configuration (the paper's, every blocked pixel counted), then
+/// each option changed alone.
 pub fn variants() -> Vec<Variant> {
     let paper = Config::default();
     let with = |name, what, config| Variant { name, what, config };
@@ -56,7 +57,7 @@ pub fn variants() -> Vec<Variant> {
     vec![
         with(
             "default",
-            "the paper's: 32×32 mask, 128² plane table, order 5 from 4×4 blocks, two-level hierarchy",
+            "the default, the paper's but with every blocked pixel counted: 32×32 mask, 128² plane table, order 5, two-level hierarchy",
             paper,
         ),
         with(
@@ -142,10 +143,10 @@ pub fn variants() -> Vec<Variant> {
             },
         ),
         with(
-            "sh-pixels",
-            "SH from every blocked pixel instead of 4×4 blocks",
+            "sh-blocks",
+            "SH from the paper's 4×4-block downsample instead of every blocked pixel",
             Config {
-                integration: Integration::ShPixels,
+                integration: Integration::ShBlocks,
                 ..paper
             },
         ),

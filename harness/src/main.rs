@@ -95,7 +95,7 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         repeats: usize,
         /// Only these configurations (comma separated, e.g.
-        /// `default,flat,sh-pixels`); default every one.
+        /// `default,flat,sh-blocks`); default every one.
         #[arg(long = "variant", value_delimiter = ',')]
         variants: Vec<String>,
     },

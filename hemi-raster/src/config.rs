@@ -157,8 +157,8 @@ impl Pvs {
 /// Settings of [`crate::HemiRaster`].
 ///
 /// The default is the paper's setup (§3.1.1, §3.2): a 32×32 mask, a
-/// 6×128×128 plane table, 25-term SH (order 5: bands 0–4) integrated from the
-/// 4×4-block downsample, back faces culled on closed meshes, the two-level
+/// 6×128×128 plane table, 25-term SH (order 5: bands 0–4) integrated from every
+/// pixel, back faces culled on closed meshes, the two-level
 /// mesh hierarchy without PVS, and the widest SIMD path the running CPU has.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Config {
@@ -184,7 +184,7 @@ impl Default for Config {
             mask_resolution: MaskResolution::R32,
             lut_resolution: 128,
             order: ShOrder::new(5).expect("5 is a valid order"),
-            integration: Integration::ShBlocks,
+            integration: Integration::ShPixels,
             backface_culling: BackfaceCulling::Auto,
             hierarchy: Hierarchy::default(),
             pvs: Pvs::Off,

@@ -33,15 +33,6 @@ pub struct DiskGrid<W: MaskRow> {
     /// Unit tangent-frame direction at each pixel centre, row-major; zero
     /// outside the disk.
     directions: Vec<Vec3>,
-    /// The disk pixels farther than [`DiskGrid::HORIZON_ANGLE`] from the normal,
-    /// which the block integration takes one by one (see
-    /// [`DiskGrid::horizon`]).
-    horizon: Mask<W>,
-    /// Per row, per group of four columns (a block's share of the row) and
-    /// per 4-bit pattern of those columns: the sum of the directions of the
-    /// pixels the pattern selects, index `(row · R/4 + group) · 16 + pattern`.
-    /// Pixels outside the disk add zero.
-    nibble_sums: Vec<Vec3>,
     _row: PhantomData<W>,
 }
 
@@ -52,11 +43,6 @@ impl<W: MaskRow> Default for DiskGrid<W> {
 }
 
 impl<W: MaskRow> DiskGrid<W> {
-    /// The angle from the normal beyond which [`DiskGrid::horizon`] holds
-    /// the pixels: 60°, where the disk (ρ = sin θ) squeezes elevation more
-    /// than twofold (dθ/dρ = 1/cos θ > 2).
-    pub const HORIZON_ANGLE: f32 = std::f32::consts::FRAC_PI_3;
-
     pub fn new() -> DiskGrid<W> {
         let r = W::RESOLUTION;
         let mut disk = Mask::EMPTY;
@@ -71,31 +57,10 @@ impl<W: MaskRow> DiskGrid<W> {
                 }
             }
         }
-        let mut horizon = Mask::EMPTY;
-        let sin_horizon = Self::HORIZON_ANGLE.sin();
-        for (row, col) in disk.pixels() {
-            let (x, y) = Self::centre(row, col);
-            if x * x + y * y > sin_horizon * sin_horizon {
-                horizon.set(row, col);
-            }
-        }
-        let mut nibble_sums = vec![Vec3::ZERO; r * (r / BLOCK) * 16];
-        for row in 0..r {
-            for group in 0..r / BLOCK {
-                for pattern in 0..16 {
-                    nibble_sums[(row * (r / BLOCK) + group) * 16 + pattern] = (0..BLOCK)
-                        .filter(|bit| pattern >> bit & 1 == 1)
-                        .map(|bit| directions[row * r + group * BLOCK + bit])
-                        .sum();
-                }
-            }
-        }
         DiskGrid {
             disk,
             weight: PI / disk.count() as f32,
             directions,
-            horizon,
-            nibble_sums,
             _row: PhantomData,
         }
     }
@@ -127,32 +92,6 @@ impl<W: MaskRow> DiskGrid<W> {
     /// Blocks per side of the downsampled mask.
     pub fn blocks(&self) -> usize {
         W::RESOLUTION / BLOCK
-    }
-
-    /// The disk pixels whose centre is farther than [`Self::HORIZON_ANGLE`] from
-    /// the normal: a quarter of the disk's area (1 − sin² 60°), 204 of the
-    /// 812 pixels at 32×32. There a 4×4 block stretches over so much
-    /// elevation (from 49° to 90° for an outermost block at 32×32, against
-    /// 14° at the zenith) that one direction cannot stand for it (see the
-    /// `transfer` module).
-    pub fn horizon(&self) -> &Mask<W> {
-        &self.horizon
-    }
-
-    /// The sum of the unit directions of the set pixels of `mask` in block
-    /// (`block_row`, `block_col`) (pixels outside the disk add nothing):
-    /// four table look-ups, one per row of the block, whatever the number
-    /// of pixels.
-    #[inline]
-    pub fn block_direction_sum(&self, mask: &Mask<W>, block_row: usize, block_col: usize) -> Vec3 {
-        let groups = W::RESOLUTION / BLOCK;
-        (BLOCK * block_row..BLOCK * (block_row + 1))
-            .map(|row| {
-                let word = mask.rows()[Mask::<W>::storage_row(row)].widen();
-                let pattern = (word >> (BLOCK * block_col)) as usize & 0xF;
-                self.nibble_sums[(row * groups + block_col) * 16 + pattern]
-            })
-            .sum()
     }
 
     /// Cosine-weighted solid angle of the set pixels of `mask` that lie in the
@@ -189,51 +128,6 @@ mod tests {
         // The raw pixel areas miss π by the boundary error documented above.
         let raw = g.disk().count() as f32 * (2.0 / 32.0f32).powi(2);
         assert!((raw / PI - 1.0 - 0.00964).abs() < 1e-4, "{raw}");
-    }
-
-    /// The table's sums are those of the pixels themselves, for every block
-    /// and whatever is set; the horizon band is the quarter of the disk
-    /// beyond 60°.
-    #[test]
-    fn block_direction_sums_and_horizon() {
-        fn check<W: MaskRow>(horizon_pixels: usize) {
-            let g = DiskGrid::<W>::new();
-            assert_eq!(g.horizon().count(), horizon_pixels);
-            assert!(g.disk().contains(g.horizon()));
-            for (r, c) in g.horizon().pixels() {
-                assert!(g.direction(r, c).z < DiskGrid::<W>::HORIZON_ANGLE.cos());
-            }
-            // A pseudo-random half of the square, corners outside the disk
-            // included.
-            let mut mask = Mask::EMPTY;
-            for r in 0..W::RESOLUTION {
-                for c in 0..W::RESOLUTION {
-                    if (r * 7 + c * 13 + r * c) % 5 < 2 {
-                        mask.set(r, c);
-                    }
-                }
-            }
-            for br in 0..g.blocks() {
-                for bc in 0..g.blocks() {
-                    let expected: Vec3 = mask
-                        .and(g.disk())
-                        .pixels()
-                        .filter(|&(r, c)| r / BLOCK == br && c / BLOCK == bc)
-                        .map(|(r, c)| g.direction(r, c))
-                        .sum();
-                    let got = g.block_direction_sum(&mask, br, bc);
-                    assert!(
-                        got.abs_diff_eq(expected, 1e-5),
-                        "{br} {bc}: {got} vs {expected}"
-                    );
-                }
-            }
-            let all = g.block_direction_sum(g.disk(), g.blocks() / 2, g.blocks() / 2);
-            assert!(all.z > 0.9 * all.length());
-        }
-        check::<u16>(60);
-        check::<u32>(204);
-        check::<u64>(812);
     }
 
     /// Nusselt: the mean of cos θ over the cosine-weighted hemisphere is 2/3,

@@ -24,6 +24,6 @@ pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
 pub use method::{HemiRaster, UpdateProfile};
 pub use rasterize::{Rasterizer, TangentFrame};
 pub use transfer::{
-    Integration, LOBE_CUTOFF, LobeGrid, PhongLobe, direct_glossy, direct_irradiance,
-    glossy_transfer, pixel_angle, sh_transfer,
+    Integration, LOBE_CUTOFF, LobeGrid, PhongLobe, TangentBasis, direct_glossy, direct_irradiance,
+    glossy_transfer, pixel_angle,
 };

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
-use shadow_core::sh::{self, ShOrder, ShRgb, Zonal};
+use shadow_core::sh::{self, ShOrder, ShRgb};
 use shadow_core::{
     Brdf, Camera, Capabilities, Environment, Error, FrameGeometry, Image, Result, Scene,
     ShadowMethod, VertexRadiance,
@@ -19,8 +19,8 @@ use crate::mask::{Mask, MaskRow};
 use crate::pvs::VisibleSets;
 use crate::rasterize::{Blockers, Rasterizer};
 use crate::transfer::{
-    Integration, LobeGrid, PhongLobe, direct_glossy, direct_irradiance, glossy_transfer,
-    pixel_angle, sh_transfer_on,
+    Integration, LobeGrid, PhongLobe, TangentBasis, direct_glossy, direct_irradiance,
+    glossy_transfer, lambert_transfer_on, pixel_angle,
 };
 
 const NAME: &str = "hemi-raster";
@@ -149,14 +149,18 @@ struct Pipeline<W: MaskRow> {
     raster: Rasterizer<W>,
     /// The compilation of the per-receiver loop this CPU runs.
     simd: Simd,
+    /// The SH basis over the mask, up to the configured order.
+    basis: TangentBasis<W>,
     /// The current frame's masks, one per vertex, all objects together.
     masks: Vec<Mask<W>>,
 }
 
 impl<W: MaskRow> Pipeline<W> {
     fn new(config: &Config) -> Result<Pipeline<W>> {
+        let raster = Rasterizer::new(config.lut_resolution)?;
         Ok(Pipeline {
-            raster: Rasterizer::new(config.lut_resolution)?,
+            basis: TangentBasis::new(raster.grid(), config.order),
+            raster,
             simd: config.simd.resolve()?,
             masks: Vec::new(),
         })
@@ -207,16 +211,15 @@ impl<W: MaskRow> Pipeline<W> {
         };
     }
 
-    fn transfer(&self, blockers: &Blockers, lambert: &Zonal, blocks: bool, out: &mut Vec<f32>) {
-        let n = lambert.order().coeff_count();
+    fn transfer(&self, blockers: &Blockers, blocks: bool, out: &mut Vec<f32>) {
+        let n = self.basis.order().coeff_count();
         out.resize(self.masks.len() * n, 0.0);
-        let grid = self.raster.grid();
         out.par_chunks_mut(n)
             .zip(self.masks.par_iter())
             .enumerate()
             .for_each(|(v, (out, mask))| {
                 let frame = blockers.frame(v);
-                sh_transfer_on(self.simd, grid, mask, &frame, lambert, blocks, out)
+                lambert_transfer_on(self.simd, &self.basis, mask, &frame, blocks, out)
             });
     }
 
@@ -255,7 +258,7 @@ impl<W: MaskRow> Pipeline<W> {
                 match lighting {
                     Lighting::Sh(light) => {
                         let mut t = [0.0f32; ShOrder::MAX.coeff_count()];
-                        glossy_transfer(&lobes, mask, &frame, &lobe, light.order(), blocks, &mut t);
+                        glossy_transfer(&self.basis, &lobes, mask, &frame, &lobe, blocks, &mut t);
                         light.dot(&t[..light.order().coeff_count()])
                     }
                     Lighting::Direct(env) => direct_glossy(&lobes, mask, &frame, &lobe, env),
@@ -379,12 +382,10 @@ impl HemiRaster {
         let (hierarchy, visible) = (prepared.hierarchy.as_ref(), prepared.visible.as_ref());
         with_pipeline!(engine, p => p.rasterize(&blockers, hierarchy, visible, profile.as_deref_mut()));
         let visibility = start.elapsed();
-        let order = self.config.order;
         match self.config.integration {
             Integration::ShBlocks | Integration::ShPixels => {
                 let blocks = self.config.integration == Integration::ShBlocks;
-                let lambert = Zonal::lambert(order);
-                with_pipeline!(engine, p => p.transfer(&blockers, &lambert, blocks, &mut self.transfer));
+                with_pipeline!(engine, p => p.transfer(&blockers, blocks, &mut self.transfer));
             }
             Integration::Direct => self.transfer.clear(),
         }

@@ -4,11 +4,11 @@ use std::sync::OnceLock;
 
 use glam::{Quat, Vec3};
 use proptest::prelude::*;
-use shadow_core::sh::{ShOrder, ShRgb, ShRotation, Zonal, project_fn_rgb};
+use shadow_core::sh::{ShOrder, ShRgb, ShRotation, project_fn_rgb};
 
 use crate::mask::Mask;
 use crate::rasterize::{Rasterizer, TangentFrame};
-use crate::transfer::{LobeGrid, PhongLobe, glossy_transfer, sh_transfer};
+use crate::transfer::{LobeGrid, PhongLobe, TangentBasis, glossy_transfer};
 
 fn raster() -> &'static Rasterizer<u32> {
     static RASTER: OnceLock<Rasterizer<u32>> = OnceLock::new();
@@ -57,9 +57,8 @@ fn irradiance(normal: Vec3, tris: &[[Vec3; 3]], light: &ShRgb, blocks: bool) -> 
     let raster = raster();
     let frame = TangentFrame::new(Vec3::ZERO, normal);
     let mask = raster.mask(&frame, tris, false);
-    let lambert = Zonal::lambert(light.order());
     let mut t = vec![0.0; light.order().coeff_count()];
-    sh_transfer(raster.grid(), &mask, &frame, &lambert, blocks, &mut t);
+    TangentBasis::new(raster.grid(), light.order()).lambert(&mask, &frame, blocks, &mut t);
     light.dot(&t)
 }
 
@@ -72,7 +71,8 @@ fn glossy(normal: Vec3, view: Vec3, tris: &[[Vec3; 3]], light: &ShRgb, blocks: b
     let lobe = PhongLobe::new(&frame, view, 20.0);
     let mut t = vec![0.0; light.order().coeff_count()];
     let lobes = LobeGrid::new(raster.grid());
-    glossy_transfer(&lobes, &mask, &frame, &lobe, light.order(), blocks, &mut t);
+    let basis = TangentBasis::new(raster.grid(), light.order());
+    glossy_transfer(&basis, &lobes, &mask, &frame, &lobe, blocks, &mut t);
     light.dot(&t)
 }
 

@@ -16,52 +16,33 @@
 //! parameterization the cosine is already in the pixel weights (Nusselt),
 //! so the blocked integral is Σ_{blocked pixels} w · Y_k(ω_pixel).
 //!
-//! The basis is evaluated at **world-space** directions (tangent direction
-//! times the vertex's frame), so the transfer vector comes out in world space
-//! and no per-vertex SH rotation is needed: rotating the vector instead would
-//! cost an O(n³) rotation build per vertex ([`shadow_core::sh::ShRotation`]),
-//! where the paper's downsampling makes the direct evaluation cheap: eight
-//! directions at a time ([`shadow_core::sh::eval_basis_lanes`]), with the
-//! blocks' pixel counts taken word-parallel ([`Mask::block_counts`]). On the
-//! human this halved the instructions of the integration.
-//!
-//! - [`Integration::ShBlocks`] (the paper's §3.2, the default): the mask is
+//! - [`Integration::ShPixels`] (the default): every blocked pixel counts at
+//!   its own direction.
+//! - [`Integration::ShBlocks`] (the paper's §3.2 optimization): the mask is
 //!   downsampled in 4×4 blocks to a grey occlusion level (the block's count
-//!   of blocked pixels), and each block's blocked pixels are evaluated at
-//!   their centroid direction (the normalized sum of their directions,
-//!   [`DiskGrid::block_direction_sum`]: four table look-ups a block), one
-//!   basis evaluation per block that has a blocked pixel; except in the band
-//!   farther than 60° from the normal ([`DiskGrid::horizon`], a quarter of
-//!   the disk), whose blocked pixels are evaluated one by one.
-//! - [`Integration::ShPixels`]: one basis evaluation per blocked pixel.
+//!   of blocked pixels), and each block counts at the mean direction of its
+//!   disk pixels. Here it saves no time (the tables below make every pixel
+//!   as cheap) and costs accuracy, most near the horizon, where the disk
+//!   (ρ = sin θ) squeezes elevation: a 4×4 block of the 32×32 mask spans
+//!   14° of elevation at the zenith, an outermost one 49° to 90°. It is
+//!   kept to reproduce the paper and measure what it cost (README).
 //!
-//! # Why the blocks use centroids and spare the horizon
-//! The downsample trades pixels for one basis evaluation per block, a
-//! one-point quadrature whose error grows with the block's angular extent
-//! and with the band (order 5 has Y_4, which changes sign every ~45°). At
-//! the zenith a 4×4 block of the 32×32 mask spans 14° of elevation, but
-//! the disk (ρ = sin θ) squeezes elevation toward the rim: an outermost
-//! block spans 49° to 90°, where no single direction stands for it. The
-//! first version evaluated every block at the fixed mean direction of its
-//! disk pixels, whatever was blocked in it; against the ray-traced transfer
-//! (`harness accuracy`'s measure, per-vertex relative L2, references of
-//! 4 × 1024 rays, paper's configuration otherwise) it cost, over
-//! integrating every pixel: chess 8.19% against 6.51%, cloth 3.97% against
-//! 1.82%, human 7.60% against 6.49%. Evaluating each block at the centroid
-//! of its blocked pixels (which follows a blocker's edge through the block)
-//! and taking the band beyond 60° pixel by pixel gives 6.52%, 1.81% and
-//! 6.52%: the per-pixel accuracy, with per-pixel cost paid only near the
-//! horizon. Either change alone falls short (on chess with back-face
-//! culling off, which removes an unrelated artefact: 4.53% fixed blocks,
-//! 3.99% centroids only, 2.35–2.45% both with the band starting anywhere
-//! from 58° to 64°, 2.39% every pixel); 2×2 sub-blocks in the band instead
-//! of pixels gave 1.91% against 1.81% on chess, 1.97% against 1.81% on
-//! cloth, and no time back. On one thread the integration of a frame
-//! took 4.0 ms instead of 1.9 ms on chess (6.2 ms every pixel) and 6.1 ms
-//! instead of 3.3 ms on the human (10.8 ms), 4–5% of an update. The unit
-//! tests' fully and half blocked hemispheres agree: worst |T_k| 0.008
-//! (fixed blocks 0.031, every pixel 0.011), relative error 0.04% (0.12%,
-//! 0.07%).
+//! # Tangent-frame tables
+//! The paper evaluates the basis per block at run time, which dominated its
+//! integration. The blocked sum is linear in the mask, and in the vertex's
+//! tangent frame the pixel directions are fixed, so the sums are tabled
+//! once ([`TangentBasis`]): per mask row, per group of four columns and per
+//! 4-bit pattern of them, −w Σ Y_k(ω_p) over the pattern's pixels (512 KB
+//! at 32×32 and order 5, padded to 32 floats an entry). A vertex then adds
+//! one entry per non-empty nibble of its mask (at most 204 at 32×32, two
+//! AVX-512 adds each) and turns the sum to world space with one SH
+//! rotation, applied through Euler angles without building its matrix
+//! ([`shadow_core::sh::EulerShRotation`], about 400 multiply-adds at order
+//! 5). Projection onto bands below n commutes with rotation, so this is
+//! the per-pixel quadrature in world space to rounding (tested). It
+//! replaced evaluating the basis at world-space directions eight at a time,
+//! per block centroid and per pixel near the horizon, which took 40% of an
+//! update with potentially visible sets on the human.
 //! - [`Integration::Direct`] (§3, "integrate the lighting directly"): no SH;
 //!   the environment's radiance summed over the visible pixels.
 //!
@@ -130,9 +111,10 @@
 //! pixel classified exactly by ray casting (the property tests).
 
 use std::f32::consts::{PI, TAU};
+use std::marker::PhantomData;
 
 use glam::{Vec3, Vec4};
-use shadow_core::sh::{ShOrder, Zonal, eval_basis_lanes};
+use shadow_core::sh::{EulerShRotation, ShOrder, Zonal, eval_basis, eval_basis_lanes};
 use shadow_core::{Environment, reflect};
 
 use crate::disk::{BLOCK, DiskGrid};
@@ -143,11 +125,11 @@ use crate::rasterize::TangentFrame;
 /// How a mask becomes shading (module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Integration {
-    /// SH transfer from the 4×4-block grey downsample (§3.2).
-    #[default]
-    ShBlocks,
     /// SH transfer from every pixel.
+    #[default]
     ShPixels,
+    /// SH transfer from the 4×4-block grey downsample (§3.2).
+    ShBlocks,
     /// No SH: the environment integrated over the visible pixels directly.
     Direct,
 }
@@ -240,89 +222,258 @@ impl<const C: usize> BasisSum<C> {
     }
 }
 
-/// [`sh_transfer`] compiled for the `simd` path (which must come from
-/// [`Simd::resolve`]): the basis evaluation is eight lanes wide, one AVX
-/// register rather than two SSE ones.
-pub(crate) fn sh_transfer_on<W: MaskRow>(
+/// The SH basis over the disk in the tangent frame, summed ahead of time
+/// for every way a mask can block it (module docs, "Tangent-frame
+/// tables"), and the per-vertex turn of a sum to world space.
+#[derive(Clone, Debug)]
+pub struct TangentBasis<W: MaskRow> {
+    disk: Mask<W>,
+    lambert: Zonal,
+    rotation: EulerShRotation,
+    /// [`CHUNK`]s per table entry: the order's coefficient count rounded up
+    /// to a power of two of chunks (order 5: 25 → 2 chunks, 32 floats), so
+    /// that a sum is held in registers by one of a few compilations.
+    chunks: usize,
+    /// Per storage row of the mask ([`Mask::storage_row`]), per group of
+    /// four columns and per 4-bit pattern of them, entry
+    /// `(storage_row · R/4 + group) · 16 + pattern`: −w Σ Y_k(ω_p) over the
+    /// disk pixels ω_p that the pattern selects.
+    patterns: Vec<Chunk>,
+    /// Per 4×4 block (row-major): −w Y_k at the mean direction of the
+    /// block's disk pixels, the paper's downsample (§3.2).
+    blocks: Vec<Chunk>,
+    /// Per pixel (row-major): Y_k(ω_p), zero outside the disk.
+    pixels: Vec<Chunk>,
+    _row: PhantomData<W>,
+}
+
+/// Coefficients per table chunk: one AVX-512 register, two AVX ones.
+const CHUNK: usize = 16;
+type Chunk = [f32; CHUNK];
+
+/// Runs `$body` with the const `$k` equal to `$chunks` (a power of two up
+/// to 16, the chunks of order 16's 256 coefficients).
+macro_rules! with_chunks {
+    ($chunks:expr, $k:ident => $body:expr) => {
+        match $chunks {
+            1 => {
+                const $k: usize = 1;
+                $body
+            }
+            2 => {
+                const $k: usize = 2;
+                $body
+            }
+            4 => {
+                const $k: usize = 4;
+                $body
+            }
+            8 => {
+                const $k: usize = 8;
+                $body
+            }
+            _ => {
+                const $k: usize = 16;
+                $body
+            }
+        }
+    };
+}
+
+/// A sum of table entries of `K` chunks, small enough for registers.
+struct TableSum<const K: usize>([Chunk; K]);
+
+impl<const K: usize> TableSum<K> {
+    #[inline(always)]
+    fn new() -> Self {
+        TableSum([[0.0; CHUNK]; K])
+    }
+
+    /// Adds entry `entry` of `table`.
+    #[inline(always)]
+    fn add(&mut self, table: &[Chunk], entry: usize) {
+        let e: &[Chunk; K] = table[entry * K..(entry + 1) * K]
+            .try_into()
+            .expect("whole entries");
+        for (s, e) in self.0.iter_mut().zip(e) {
+            for (s, e) in s.iter_mut().zip(e) {
+                *s += e;
+            }
+        }
+    }
+
+    /// Adds `weight` times entry `entry` of `table`.
+    #[inline(always)]
+    fn add_scaled(&mut self, table: &[Chunk], entry: usize, weight: f32) {
+        let e: &[Chunk; K] = table[entry * K..(entry + 1) * K]
+            .try_into()
+            .expect("whole entries");
+        for (s, e) in self.0.iter_mut().zip(e) {
+            for (s, e) in s.iter_mut().zip(e) {
+                *s += weight * e;
+            }
+        }
+    }
+
+    /// The sum turned from the tangent frame `frame` to world space, its
+    /// first `n` coefficients written to `out`.
+    #[inline(always)]
+    fn rotate_into(mut self, rotation: &EulerShRotation, frame: &TangentFrame, out: &mut [f32]) {
+        let n = out.len();
+        let sum = &mut self.0.as_flattened_mut()[..n];
+        rotation.apply(frame.to_world(), sum);
+        out.copy_from_slice(sum);
+    }
+}
+
+impl<W: MaskRow> TangentBasis<W> {
+    /// The tables of `grid`'s pixels up to `order`: 512 KB at 32×32 and
+    /// order 5 for the patterns, 128 KB for the pixels.
+    pub fn new(grid: &DiskGrid<W>, order: ShOrder) -> TangentBasis<W> {
+        let r = W::RESOLUTION;
+        let n = order.coeff_count();
+        let chunks = n.div_ceil(CHUNK).next_power_of_two();
+        let entries = |count: usize| vec![[0.0f32; CHUNK]; count * chunks];
+        // Adds k · Y(d) to entry `at` of `table`.
+        let add_basis = |table: &mut [Chunk], at: usize, d: Vec3, k: f32| {
+            let mut y = [0.0f32; ShOrder::MAX.coeff_count()];
+            eval_basis(order, d, &mut y[..n]);
+            let entry = table[at * chunks..(at + 1) * chunks].as_flattened_mut();
+            for (e, y) in entry.iter_mut().zip(&y[..n]) {
+                *e += k * y;
+            }
+        };
+        let mut pixels = entries(r * r);
+        for (row, col) in grid.disk().pixels() {
+            add_basis(&mut pixels, row * r + col, grid.direction(row, col), 1.0);
+        }
+        let w = grid.weight();
+        let groups = r / BLOCK;
+        let mut patterns = entries(r * groups * 16);
+        for (row, col) in grid.disk().pixels() {
+            let (group, bit) = (col / BLOCK, col % BLOCK);
+            let first = (Mask::<W>::storage_row(row) * groups + group) * 16;
+            for pattern in (0..16).filter(|pattern| pattern >> bit & 1 == 1) {
+                add_basis(&mut patterns, first + pattern, grid.direction(row, col), -w);
+            }
+        }
+        let mut blocks = entries(groups * groups);
+        for block in 0..groups * groups {
+            let mean: Vec3 = grid
+                .disk()
+                .pixels()
+                .filter(|&(r, c)| (r / BLOCK) * groups + c / BLOCK == block)
+                .map(|(r, c)| grid.direction(r, c))
+                .sum();
+            // A corner block outside the disk is never counted.
+            add_basis(&mut blocks, block, mean.normalize_or(Vec3::Z), -w);
+        }
+        TangentBasis {
+            disk: *grid.disk(),
+            lambert: Zonal::lambert(order),
+            rotation: EulerShRotation::new(order),
+            chunks,
+            patterns,
+            blocks,
+            pixels,
+            _row: PhantomData,
+        }
+    }
+
+    pub fn order(&self) -> ShOrder {
+        self.lambert.order()
+    }
+
+    /// Writes the world-space Lambert transfer vector of a vertex with
+    /// tangent frame `frame` and visibility `mask` into
+    /// `out[..order.coeff_count()]` (without ρ/π); `blocks` selects the
+    /// paper's 4×4 downsample. Allocation-free; always inlined, so that the
+    /// method's per-instruction-set compilations hold the whole body.
+    ///
+    /// # Panics
+    /// If `out` is shorter than the order's coefficient count.
+    #[inline(always)]
+    pub fn lambert(&self, mask: &Mask<W>, frame: &TangentFrame, blocks: bool, out: &mut [f32]) {
+        let out = &mut out[..self.order().coeff_count()];
+        let blocked = mask.and(&self.disk);
+        with_chunks!(self.chunks, K => {
+            let mut sum = TableSum::<K>::new();
+            if blocks {
+                let side = W::RESOLUTION / BLOCK;
+                let mut counts = [0u8; MAX_BLOCKS];
+                blocked.block_counts(&mut counts);
+                for (b, &count) in counts[..side * side].iter().enumerate() {
+                    if count > 0 {
+                        sum.add_scaled(&self.blocks, b, f32::from(count));
+                    }
+                }
+            } else {
+                let groups = W::RESOLUTION / BLOCK;
+                for (row, word) in blocked.rows().iter().enumerate() {
+                    let mut bits = word.widen();
+                    while bits != 0 {
+                        let group = bits.trailing_zeros() as usize / BLOCK;
+                        let pattern = (bits >> (BLOCK * group)) as usize & 0xF;
+                        bits &= !(0xF << (BLOCK * group));
+                        sum.add(&self.patterns, (row * groups + group) * 16 + pattern);
+                    }
+                }
+            }
+            sum.rotate_into(&self.rotation, frame, out);
+        });
+        let mut unshadowed = [0.0f32; ShOrder::MAX.coeff_count()];
+        let unshadowed = &mut unshadowed[..out.len()];
+        self.lambert.project_along(frame.normal(), unshadowed);
+        for (o, u) in out.iter_mut().zip(unshadowed.iter()) {
+            *o += u;
+        }
+    }
+}
+
+/// [`TangentBasis::lambert`] compiled for the `simd` path (which must come
+/// from [`Simd::resolve`]): the table sums in AVX registers.
+pub(crate) fn lambert_transfer_on<W: MaskRow>(
     simd: Simd,
-    grid: &DiskGrid<W>,
+    basis: &TangentBasis<W>,
     mask: &Mask<W>,
     frame: &TangentFrame,
-    lambert: &Zonal,
     blocks: bool,
     out: &mut [f32],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if matches!(simd, Simd::Avx2 | Simd::Avx512) {
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2<W: MaskRow>(
-            grid: &DiskGrid<W>,
-            mask: &Mask<W>,
-            frame: &TangentFrame,
-            lambert: &Zonal,
-            blocks: bool,
-            out: &mut [f32],
-        ) {
-            sh_transfer(grid, mask, frame, lambert, blocks, out);
+    match simd {
+        Simd::Avx512 => {
+            #[target_feature(enable = "avx512f,avx2,fma,bmi1")]
+            fn avx512<W: MaskRow>(
+                basis: &TangentBasis<W>,
+                mask: &Mask<W>,
+                frame: &TangentFrame,
+                blocks: bool,
+                out: &mut [f32],
+            ) {
+                basis.lambert(mask, frame, blocks, out);
+            }
+            // SAFETY: `Simd::resolve` only yields this path on CPUs with AVX-512F.
+            return unsafe { avx512(basis, mask, frame, blocks, out) };
         }
-        // SAFETY: `Simd::resolve` only yields these paths on CPUs with AVX2.
-        return unsafe { avx2(grid, mask, frame, lambert, blocks, out) };
+        Simd::Avx2 => {
+            #[target_feature(enable = "avx2,fma,bmi1")]
+            fn avx2<W: MaskRow>(
+                basis: &TangentBasis<W>,
+                mask: &Mask<W>,
+                frame: &TangentFrame,
+                blocks: bool,
+                out: &mut [f32],
+            ) {
+                basis.lambert(mask, frame, blocks, out);
+            }
+            // SAFETY: `Simd::resolve` only yields this path on CPUs with AVX2.
+            return unsafe { avx2(basis, mask, frame, blocks, out) };
+        }
+        Simd::Auto | Simd::Portable => {}
     }
     let _ = simd;
-    sh_transfer(grid, mask, frame, lambert, blocks, out);
-}
-
-/// Writes the world-space Lambert transfer vector of a vertex with tangent
-/// frame `frame` and visibility `mask` into `out[..order.coeff_count()]`
-/// (without ρ/π). `lambert` must be `Zonal::lambert` of `order`; `blocks`
-/// selects the 4×4 downsample. Allocation-free; always inlined, so that the
-/// method's per-instruction-set compilations hold the whole body.
-///
-/// # Panics
-/// If `out` is shorter than the order's coefficient count.
-#[inline(always)]
-pub fn sh_transfer<W: MaskRow>(
-    grid: &DiskGrid<W>,
-    mask: &Mask<W>,
-    frame: &TangentFrame,
-    lambert: &Zonal,
-    blocks: bool,
-    out: &mut [f32],
-) {
-    let order = lambert.order();
-    let out = &mut out[..order.coeff_count()];
-    lambert.project_along(frame.normal(), out);
-    let to_world = frame.to_world();
-    let blocked = mask.and(grid.disk());
-    if blocks {
-        // Module docs: blocks at the centroid of their blocked pixels, the
-        // band beyond 60° pixel by pixel.
-        let side = grid.blocks();
-        let near_horizon = blocked.and(grid.horizon());
-        let inner = blocked.and_not(grid.horizon());
-        let mut counts = [0u8; MAX_BLOCKS];
-        inner.block_counts(&mut counts);
-        let weight = grid.weight();
-        let block_terms = counts[..side * side]
-            .iter()
-            .enumerate()
-            .filter(|&(_, &count)| count > 0)
-            .map(|(b, &count)| {
-                // At least one pixel, all in the upper hemisphere: the sum
-                // is not zero.
-                let sum = grid.block_direction_sum(&inner, b / side, b % side);
-                (to_world * sum.normalize(), -f32::from(count) * weight)
-            });
-        let pixel_terms = near_horizon
-            .pixels()
-            .map(|(r, c)| (to_world * grid.direction(r, c), -weight));
-        add_weighted_basis(order, block_terms.chain(pixel_terms), out);
-    } else {
-        let terms = blocked
-            .pixels()
-            .map(|(r, c)| (to_world * grid.direction(r, c), -grid.weight()));
-        add_weighted_basis(order, terms, out);
-    }
+    basis.lambert(mask, frame, blocks, out);
 }
 
 /// The specular lobe of [`shadow_core::Brdf::Phong`] at one vertex for one
@@ -442,23 +593,27 @@ impl<'a, W: MaskRow> LobeGrid<'a, W> {
 /// Writes the world-space glossy transfer vector T_k(ω_o) of a vertex with
 /// tangent frame `frame` and visibility `mask`, for the lobe of its view
 /// (module docs, "Glossy transfer"), into `out[..order.coeff_count()]`
-/// (without ρ_s): Σ_visible w_p · lobe(ω_p) · Y_k(ω_p). With `blocks`, the
-/// lobe is summed per pixel and the basis evaluated once per 4×4 block, at
-/// the lobe-weighted mean direction of its visible pixels. Allocation-free.
+/// (without ρ_s), `order` being `basis`'s: Σ_visible w_p · lobe(ω_p) ·
+/// Y_k(ω_p), summed in the tangent frame from the per-pixel table and
+/// turned to world space. With `blocks`, the lobe is summed per pixel and
+/// the basis evaluated once per 4×4 block, at the lobe-weighted mean
+/// direction of its visible pixels. Allocation-free.
 ///
 /// # Panics
-/// If `out` is shorter than the order's coefficient count.
+/// If `out` is shorter than the order's coefficient count, or `lobes` is
+/// not of the grid `basis` was built on.
 pub fn glossy_transfer<W: MaskRow>(
+    basis: &TangentBasis<W>,
     lobes: &LobeGrid<W>,
     mask: &Mask<W>,
     frame: &TangentFrame,
     lobe: &PhongLobe,
-    order: ShOrder,
     blocks: bool,
     out: &mut [f32],
 ) {
-    let out = &mut out[..order.coeff_count()];
-    out.fill(0.0);
+    let order = basis.order();
+    let n = order.coeff_count();
+    let out = &mut out[..n];
     let grid = lobes.grid();
     let to_world = frame.to_world();
     let visible = grid.visible(mask);
@@ -469,6 +624,7 @@ pub fn glossy_transfer<W: MaskRow>(
         (f > 0.0).then_some((r, c, d, f))
     });
     if blocks {
+        out.fill(0.0);
         let side = grid.blocks();
         // Per block: (Σ w_p lobe · ω, Σ w_p lobe) over its visible pixels.
         let mut sums = [Vec4::ZERO; MAX_BLOCKS];
@@ -483,8 +639,13 @@ pub fn glossy_transfer<W: MaskRow>(
             .map(|sum| (to_world * (sum.truncate() / sum.w).normalize(), sum.w));
         add_weighted_basis(order, terms, out);
     } else {
-        let terms = lit.map(|(_, _, d, f)| (to_world * d, f));
-        add_weighted_basis(order, terms, out);
+        with_chunks!(basis.chunks, K => {
+            let mut sum = TableSum::<K>::new();
+            for (r, c, _, f) in lit {
+                sum.add_scaled(&basis.pixels, r * W::RESOLUTION + c, f);
+            }
+            sum.rotate_into(&basis.rotation, frame, out);
+        });
     }
 }
 
@@ -570,22 +731,93 @@ pub(crate) mod tests {
     #[test]
     fn empty_and_full_masks() {
         let grid = DiskGrid::<u32>::new();
-        let lambert = Zonal::lambert(order5());
+        let basis = TangentBasis::new(&grid, order5());
         let frame = TangentFrame::new(Vec3::ZERO, Vec3::new(0.2, 0.9, -0.3).normalize());
         let mut t = [0.0; 25];
-        sh_transfer(&grid, &Mask::EMPTY, &frame, &lambert, true, &mut t);
+        basis.lambert(&Mask::EMPTY, &frame, true, &mut t);
         let mut exact = [0.0; 25];
-        lambert.project_along(frame.normal(), &mut exact);
+        Zonal::lambert(order5()).project_along(frame.normal(), &mut exact);
         assert_eq!(t, exact);
         // Fully blocked: the quadrature of the whole hemisphere cancels the
-        // exact term up to the disk quadrature error.
-        for blocks in [false, true] {
-            sh_transfer(&grid, grid.disk(), &frame, &lambert, blocks, &mut t);
+        // exact term up to the disk quadrature error (measured 0.011 every
+        // pixel, 0.031 from blocks at their mean direction).
+        for (blocks, bound) in [(false, 0.012), (true, 0.032)] {
+            basis.lambert(grid.disk(), &frame, blocks, &mut t);
             let worst = t.iter().fold(0.0f32, |m, v| m.max(v.abs()));
             assert!(t[0].abs() < 1e-5, "band 0 is exact: {}", t[0]);
             eprintln!("fully blocked, blocks {blocks}: worst |T_k| {worst}");
-            assert!(worst < 0.015, "{blocks}: {worst}");
+            assert!(worst < bound, "{blocks}: {worst}");
         }
+    }
+
+    /// The tables and the turn to world space give, to rounding, the sums
+    /// they stand for: Σ w_p Y_k over the blocked pixels, and over the lit
+    /// ones weighted by the lobe, evaluated at world-space directions.
+    #[test]
+    fn tables_equal_the_per_pixel_sums_in_world_space() {
+        fn check<W: MaskRow>(order: u32) {
+            let order = ShOrder::new(order).unwrap();
+            let n = order.coeff_count();
+            let grid = DiskGrid::<W>::new();
+            let basis = TangentBasis::new(&grid, order);
+            let lobes = LobeGrid::new(&grid);
+            let mut state = 7u64;
+            for normal in [Vec3::Y, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8), Vec3::X] {
+                let frame = TangentFrame::new(Vec3::ZERO, normal.normalize());
+                let to_world = frame.to_world();
+                let mut mask = Mask::<W>::EMPTY;
+                for r in 0..W::RESOLUTION {
+                    for c in 0..W::RESOLUTION {
+                        state = state.wrapping_mul(6364136223846793005).wrapping_add(1);
+                        if state >> 62 != 0 {
+                            mask.set(r, c);
+                        }
+                    }
+                }
+                let sum = |weight: &dyn Fn(usize, usize, Vec3) -> f32, pixels: &Mask<W>| {
+                    let mut out = vec![0.0; n];
+                    let mut y = vec![0.0; n];
+                    for (r, c) in pixels.and(grid.disk()).pixels() {
+                        let d = grid.direction(r, c);
+                        eval_basis(order, to_world * d, &mut y);
+                        let w = weight(r, c, d);
+                        for (o, y) in out.iter_mut().zip(&y) {
+                            *o += w * y;
+                        }
+                    }
+                    out
+                };
+                let mut want = sum(&|_, _, _| -grid.weight(), &mask);
+                let mut exact = vec![0.0; n];
+                Zonal::lambert(order).project_along(frame.normal(), &mut exact);
+                for (w, e) in want.iter_mut().zip(&exact) {
+                    *w += e;
+                }
+                let mut got = vec![0.0; n];
+                basis.lambert(&mask, &frame, false, &mut got);
+                for (k, (a, b)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - b).abs() < 2e-5,
+                        "lambert {order} {normal}: {k}: {a} vs {b}"
+                    );
+                }
+                let lobe = PhongLobe::new(&frame, Vec3::new(0.2, 0.9, 0.1).normalize(), 8.0);
+                let want = sum(
+                    &|r, c, d| lobe.eval(d) * lobes.weight(r, c),
+                    &grid.visible(&mask),
+                );
+                glossy_transfer(&basis, &lobes, &mask, &frame, &lobe, false, &mut got);
+                for (k, (a, b)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - b).abs() < 2e-5,
+                        "glossy {order} {normal}: {k}: {a} vs {b}"
+                    );
+                }
+            }
+        }
+        check::<u16>(3);
+        check::<u32>(5);
+        check::<u64>(9);
     }
 
     /// Half the hemisphere blocked (a plane through the normal): the SH paths
@@ -594,7 +826,7 @@ pub(crate) mod tests {
     fn half_blocked_paths_agree() {
         let grid = DiskGrid::<u64>::new();
         let order = ShOrder::new(8).unwrap();
-        let lambert = Zonal::lambert(order);
+        let basis = TangentBasis::new(&grid, order);
         let light: ShRgb = project_fn_rgb(order, 64, sky);
         let normal = Vec3::new(0.3, 0.8, 0.2).normalize();
         let frame = TangentFrame::new(Vec3::ZERO, normal);
@@ -621,7 +853,7 @@ pub(crate) mod tests {
             }
         }
         for blocks in [false, true] {
-            sh_transfer(&grid, &blocked, &frame, &lambert, blocks, &mut t);
+            basis.lambert(&blocked, &frame, blocks, &mut t);
             let e = light.dot(&t);
             let rel = (e - reference).length() / reference.length();
             eprintln!("half blocked, blocks {blocks}: relative error {rel}");
@@ -685,7 +917,7 @@ pub(crate) mod tests {
     fn lobe_quadrature_error<W: MaskRow>(exponent: f32, theta_o: f32) -> f32 {
         let grid = DiskGrid::<W>::new();
         let lobes = LobeGrid::new(&grid);
-        let order = ShOrder::new(1).unwrap();
+        let basis = TangentBasis::new(&grid, ShOrder::new(1).unwrap());
         let y0 = 0.5 / PI.sqrt();
         let th = theta_o.to_radians();
         let exact = clipped_lobe_albedo(th as f64, exponent as f64, 3000, 1024) as f32;
@@ -698,7 +930,7 @@ pub(crate) mod tests {
             let lobe = PhongLobe::new(&frame, view, exponent);
             let mut t = [[0.0f32; 1]; 2];
             for (blocks, t) in [false, true].into_iter().zip(&mut t) {
-                glossy_transfer(&lobes, &Mask::EMPTY, &frame, &lobe, order, blocks, t);
+                glossy_transfer(&basis, &lobes, &Mask::EMPTY, &frame, &lobe, blocks, t);
             }
             assert!((t[0][0] - t[1][0]).abs() <= 1e-5 * t[0][0], "{t:?}");
             worst = worst.max((t[0][0] / y0 - exact).abs() / exact);
