@@ -33,13 +33,16 @@
 //! tangent frame the pixel directions are fixed, so the sums are tabled
 //! once ([`TangentBasis`]): per mask row, per group of four columns and per
 //! 4-bit pattern of them, −w Σ Y_k(ω_p) over the pattern's pixels (512 KB
-//! at 32×32 and order 5, padded to 32 floats an entry). A vertex then adds
-//! one entry per non-empty nibble of its mask (at most 204 at 32×32, two
-//! AVX-512 adds each) and turns the sum to world space with one SH
+//! at 32×32 and order 5, padded to 32 floats an entry). A vertex starts
+//! from the unshadowed term in the tangent frame (zonal about ẑ: constant),
+//! adds one entry per non-empty nibble of its mask (at most 204 at 32×32,
+//! two AVX-512 adds each) and turns the sum to world space with one SH
 //! rotation, applied through Euler angles without building its matrix
-//! ([`shadow_core::sh::EulerShRotation`], about 400 multiply-adds at order
-//! 5). Projection onto bands below n commutes with rotation, so this is
-//! the per-pixel quadrature in world space to rounding (tested). It
+//! ([`shadow_core::sh::EulerShRotation`]: at order 5, three turns about
+//! the polar axis and two fixed products of 25 sixteen-lane multiply-adds
+//! each). Projection onto bands below n commutes with rotation, so this is
+//! the per-pixel quadrature in world space to rounding (tested), and band
+//! 0, which rotations leave alone, is exact: the white furnace holds. It
 //! replaced evaluating the basis at world-space directions eight at a time,
 //! per block centroid and per pixel near the horizon, which took 40% of an
 //! update with potentially visible sets on the human.
@@ -114,7 +117,9 @@ use std::f32::consts::{PI, TAU};
 use std::marker::PhantomData;
 
 use glam::{Vec3, Vec4};
-use shadow_core::sh::{EulerShRotation, ShOrder, Zonal, eval_basis, eval_basis_lanes};
+use shadow_core::sh::{
+    CHUNK, Chunk, EulerShRotation, ShOrder, Zonal, eval_basis, eval_basis_lanes,
+};
 use shadow_core::{Environment, reflect};
 
 use crate::disk::{BLOCK, DiskGrid};
@@ -228,7 +233,7 @@ impl<const C: usize> BasisSum<C> {
 #[derive(Clone, Debug)]
 pub struct TangentBasis<W: MaskRow> {
     disk: Mask<W>,
-    lambert: Zonal,
+    order: ShOrder,
     rotation: EulerShRotation,
     /// [`CHUNK`]s per table entry: the order's coefficient count rounded up
     /// to a power of two of chunks (order 5: 25 → 2 chunks, 32 floats), so
@@ -244,12 +249,12 @@ pub struct TangentBasis<W: MaskRow> {
     blocks: Vec<Chunk>,
     /// Per pixel (row-major): Y_k(ω_p), zero outside the disk.
     pixels: Vec<Chunk>,
+    /// One entry: the unshadowed Lambert transfer in the tangent frame,
+    /// Λ_l Y_k(ẑ) (zonal about the normal), where every sum starts, so
+    /// that the one rotation to world space turns it to the normal too.
+    unshadowed: Vec<Chunk>,
     _row: PhantomData<W>,
 }
-
-/// Coefficients per table chunk: one AVX-512 register, two AVX ones.
-const CHUNK: usize = 16;
-type Chunk = [f32; CHUNK];
 
 /// Runs `$body` with the const `$k` equal to `$chunks` (a power of two up
 /// to 16, the chunks of order 16's 256 coefficients).
@@ -289,6 +294,16 @@ impl<const K: usize> TableSum<K> {
         TableSum([[0.0; CHUNK]; K])
     }
 
+    /// The sum holding entry `entry` of `table`.
+    #[inline(always)]
+    fn of(table: &[Chunk], entry: usize) -> Self {
+        TableSum(
+            table[entry * K..(entry + 1) * K]
+                .try_into()
+                .expect("whole entries"),
+        )
+    }
+
     /// Adds entry `entry` of `table`.
     #[inline(always)]
     fn add(&mut self, table: &[Chunk], entry: usize) {
@@ -316,13 +331,11 @@ impl<const K: usize> TableSum<K> {
     }
 
     /// The sum turned from the tangent frame `frame` to world space, its
-    /// first `n` coefficients written to `out`.
+    /// first `out.len()` coefficients written to `out`.
     #[inline(always)]
     fn rotate_into(mut self, rotation: &EulerShRotation, frame: &TangentFrame, out: &mut [f32]) {
-        let n = out.len();
-        let sum = &mut self.0.as_flattened_mut()[..n];
-        rotation.apply(frame.to_world(), sum);
-        out.copy_from_slice(sum);
+        rotation.apply_chunks(frame.to_world(), &mut self.0);
+        out.copy_from_slice(&self.0.as_flattened()[..out.len()]);
     }
 }
 
@@ -368,20 +381,23 @@ impl<W: MaskRow> TangentBasis<W> {
             // A corner block outside the disk is never counted.
             add_basis(&mut blocks, block, mean.normalize_or(Vec3::Z), -w);
         }
+        let mut unshadowed = entries(1);
+        Zonal::lambert(order).project_along(Vec3::Z, &mut unshadowed.as_flattened_mut()[..n]);
         TangentBasis {
             disk: *grid.disk(),
-            lambert: Zonal::lambert(order),
+            order,
             rotation: EulerShRotation::new(order),
             chunks,
             patterns,
             blocks,
             pixels,
+            unshadowed,
             _row: PhantomData,
         }
     }
 
     pub fn order(&self) -> ShOrder {
-        self.lambert.order()
+        self.order
     }
 
     /// Writes the world-space Lambert transfer vector of a vertex with
@@ -397,7 +413,7 @@ impl<W: MaskRow> TangentBasis<W> {
         let out = &mut out[..self.order().coeff_count()];
         let blocked = mask.and(&self.disk);
         with_chunks!(self.chunks, K => {
-            let mut sum = TableSum::<K>::new();
+            let mut sum = TableSum::<K>::of(&self.unshadowed, 0);
             if blocks {
                 let side = W::RESOLUTION / BLOCK;
                 let mut counts = [0u8; MAX_BLOCKS];
@@ -421,12 +437,6 @@ impl<W: MaskRow> TangentBasis<W> {
             }
             sum.rotate_into(&self.rotation, frame, out);
         });
-        let mut unshadowed = [0.0f32; ShOrder::MAX.coeff_count()];
-        let unshadowed = &mut unshadowed[..out.len()];
-        self.lambert.project_along(frame.normal(), unshadowed);
-        for (o, u) in out.iter_mut().zip(unshadowed.iter()) {
-            *o += u;
-        }
     }
 }
 
@@ -734,10 +744,18 @@ pub(crate) mod tests {
         let basis = TangentBasis::new(&grid, order5());
         let frame = TangentFrame::new(Vec3::ZERO, Vec3::new(0.2, 0.9, -0.3).normalize());
         let mut t = [0.0; 25];
-        basis.lambert(&Mask::EMPTY, &frame, true, &mut t);
         let mut exact = [0.0; 25];
         Zonal::lambert(order5()).project_along(frame.normal(), &mut exact);
-        assert_eq!(t, exact);
+        for blocks in [false, true] {
+            // Nothing blocked: the unshadowed transfer turned to the normal,
+            // to rounding; band 0, which no rotation changes, exactly (the
+            // white furnace).
+            basis.lambert(&Mask::EMPTY, &frame, blocks, &mut t);
+            assert_eq!(t[0], exact[0]);
+            for (k, (a, b)) in t.iter().zip(&exact).enumerate() {
+                assert!((a - b).abs() < 1e-6, "{k}: {a} vs {b}");
+            }
+        }
         // Fully blocked: the quadrature of the whole hemisphere cancels the
         // exact term up to the disk quadrature error (measured 0.011 every
         // pixel, 0.031 from blocks at their mean direction).

@@ -67,7 +67,7 @@ use serde::Serialize;
 pub use basis::{eval_basis, eval_basis_lanes};
 pub use projection::{project_environment, project_fn, project_fn_rgb};
 pub use rgb::ShRgb;
-pub use rotation::{EulerShRotation, ShRotation};
+pub use rotation::{CHUNK, Chunk, EulerShRotation, ShRotation};
 pub use zonal::Zonal;
 
 /// A validated SH order: the number of bands n, 1 ≤ n ≤ [`ShOrder::MAX`],

@@ -1,6 +1,6 @@
 //! Rotation of SH coefficient vectors (see [`ShRotation`]).
 
-use std::ops::{Add, Mul};
+use std::ops::{Add, Mul, Range};
 
 use glam::{DMat3, Mat3, Quat};
 
@@ -139,6 +139,13 @@ impl ShRotation {
     }
 }
 
+/// Coefficients per chunk of [`EulerShRotation::apply_chunks`]: one
+/// AVX-512 register, two AVX ones.
+pub const CHUNK: usize = 16;
+
+/// Sixteen coefficients, the unit of [`EulerShRotation::apply_chunks`].
+pub type Chunk = [f32; CHUNK];
+
 /// The SH rotation of any rotation applied in place without building its
 /// matrix: for rotations that change with every use, such as a vertex's
 /// tangent frame, where [`ShRotation`]'s O(n³) build would cost far more
@@ -152,56 +159,168 @@ impl ShRotation {
 /// order m is cos mφ and sin mφ), so the SH rotation of R is three such
 /// turns and two products with the fixed blocks of T and T⁻¹ (the
 /// decomposition of Kautz, Sloan and Snyder 2002, "Fast, arbitrary BRDF
-/// shading for low-frequency lighting using spherical harmonics"):
-/// 2 Σ (2l+1)² + O(n²) multiply-adds, about 400 at order 5, and
-/// no trigonometric function (the angles' cosines and sines come from R's
-/// entries, their multiples by the angle-addition recurrence).
+/// shading for low-frequency lighting using spherical harmonics"). No
+/// trigonometric function is called: the angles' cosines and sines come
+/// from R's entries, their multiples by the angle-addition recurrence.
+///
+/// Laid out for SIMD ([`EulerShRotation::apply_chunks`]): coefficients in
+/// zero-padded chunks of [`CHUNK`], the fixed products as one
+/// chunk-wide multiply-add per coefficient and chunk its band touches
+/// (order 5: 25, in place of 2 Σ (2l+1)² = 328 scalar ones), the polar
+/// turns as chunk-wide arithmetic on each coefficient and its (l, −m)
+/// partner.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EulerShRotation {
-    /// T = R_z(−90°) and its inverse, as SH rotations.
-    quarter: ShRotation,
-    quarter_inverse: ShRotation,
+    order: ShOrder,
+    /// T = R_z(−90°) and its inverse, by columns.
+    quarter: BandColumns,
+    quarter_inverse: BandColumns,
+    /// Per coefficient k = l² + l + m, by chunk: |m| (padding: 0).
+    abs_m: Vec<Chunk>,
+    /// Per coefficient: the sign of m (padding: 0).
+    sign_m: Vec<Chunk>,
+    /// Per coefficient: the index of its partner l² + l − m.
+    partner: Vec<u16>,
 }
 
-/// The longest band of [`ShOrder::MAX`]: room for one band on the stack.
-const MAX_BAND: usize = 2 * ShOrder::MAX.bands() - 1;
+/// A block-diagonal SH matrix by chunks of rows: chunk c of the result
+/// is Σ_j M[c-th rows, j] · v_j over the columns j of the bands its rows
+/// belong to (a contiguous range), so that the sum stays in a register.
+#[derive(Clone, Debug, PartialEq)]
+struct BandColumns {
+    /// Per chunk of rows: its columns, and where their entries start in
+    /// `entries`.
+    spans: Vec<(Range<usize>, usize)>,
+    /// Per chunk of rows and column of its span: that column's entries in
+    /// the chunk's rows (zero in rows of other bands and past n²).
+    entries: Vec<Chunk>,
+}
+
+impl BandColumns {
+    fn new(rotation: &ShRotation) -> BandColumns {
+        let n = rotation.order.coeff_count();
+        let band = |k: usize| k.isqrt();
+        let mut spans = Vec::new();
+        let mut entries = Vec::new();
+        for first_row in (0..n).step_by(CHUNK) {
+            let last_row = (first_row + CHUNK).min(n) - 1;
+            let columns = band(first_row).pow(2)..(band(last_row) + 1).pow(2);
+            spans.push((columns.clone(), entries.len()));
+            for j in columns {
+                let l = band(j);
+                let mut chunk = [0.0; CHUNK];
+                for (i, e) in chunk.iter_mut().enumerate() {
+                    let row = first_row + i;
+                    if row < n && band(row) == l {
+                        let (size, start) = (2 * l + 1, block_start(l));
+                        *e = rotation.blocks[start + (row - l * l) * size + (j - l * l)];
+                    }
+                }
+                entries.push(chunk);
+            }
+        }
+        BandColumns { spans, entries }
+    }
+
+    /// `coeffs` ← M · `coeffs`.
+    #[inline(always)]
+    fn apply<const K: usize>(&self, coeffs: &mut [Chunk; K]) {
+        let v = *coeffs;
+        let v = v.as_flattened();
+        for (c, out) in coeffs.iter_mut().enumerate() {
+            let mut sum = [0.0f32; CHUNK];
+            // Chunks past n² are padding, and come out zero.
+            let Some((columns, at)) = self.spans.get(c) else {
+                *out = sum;
+                continue;
+            };
+            for (column, &v) in self.entries[*at..].iter().zip(&v[columns.clone()]) {
+                for (s, c) in sum.iter_mut().zip(column) {
+                    *s += c * v;
+                }
+            }
+            *out = sum;
+        }
+    }
+}
+
+/// Where band `l`'s block starts in [`ShRotation`]'s `blocks`: Σ_{i<l}
+/// (2i+1)².
+fn block_start(l: usize) -> usize {
+    (0..l).map(|i| (2 * i + 1).pow(2)).sum()
+}
 
 impl EulerShRotation {
     /// The fixed quarter turns, up to `order`.
     pub fn new(order: ShOrder) -> EulerShRotation {
         let t = DMat3::from_rotation_z(-std::f64::consts::FRAC_PI_2);
+        let chunks = order.coeff_count().div_ceil(CHUNK);
+        let mut abs_m = vec![[0.0; CHUNK]; chunks];
+        let mut sign_m = vec![[0.0; CHUNK]; chunks];
+        let mut partner = Vec::with_capacity(order.coeff_count());
+        for l in 0..order.bands() as i32 {
+            for m in -l..=l {
+                let k = (l * l + l + m) as usize;
+                abs_m[k / CHUNK][k % CHUNK] = m.abs() as f32;
+                sign_m[k / CHUNK][k % CHUNK] = m.signum() as f32;
+                partner.push((l * l + l - m) as u16);
+            }
+        }
         EulerShRotation {
-            quarter: ShRotation::build(order, t),
-            quarter_inverse: ShRotation::build(order, t.transpose()),
+            order,
+            quarter: BandColumns::new(&ShRotation::build(order, t)),
+            quarter_inverse: BandColumns::new(&ShRotation::build(order, t.transpose())),
+            abs_m,
+            sign_m,
+            partner,
         }
     }
 
     pub fn order(&self) -> ShOrder {
-        self.quarter.order
+        self.order
     }
 
     /// Rotates `coeffs` in place by the rotation matrix `r` (columns:
-    /// ω ↦ rω), with the semantics of [`ShRotation::apply`]. `r` must be a
-    /// rotation; this is not checked (it is meant for per-vertex use, where
-    /// [`ShRotation::from_mat3`]'s check would be a cost). Allocation-free.
+    /// ω ↦ rω), with the semantics of [`ShRotation::apply`], at any order
+    /// up to this one's. `r` must be a rotation; this is not checked (it is
+    /// meant for per-vertex use, where [`ShRotation::from_mat3`]'s check
+    /// would be a cost). Allocation-free.
     ///
     /// # Panics
     /// If `coeffs` is not n² long for an order n no higher than this one's.
-    ///
-    /// Always inlined, so that a caller compiled for wider SIMD compiles it
-    /// for the same.
-    #[inline(always)]
     pub fn apply(&self, r: Mat3, coeffs: &mut [f32]) {
-        let bands = ShOrder::from_coeff_count(coeffs.len())
-            .filter(|o| *o <= self.order())
+        let n = ShOrder::from_coeff_count(coeffs.len())
+            .filter(|o| *o <= self.order)
             .unwrap_or_else(|| {
                 panic!(
                     "SH rotation of {} cannot rotate {} coefficients",
-                    self.order(),
+                    self.order,
                     coeffs.len()
                 )
             })
-            .bands();
+            .coeff_count();
+        // The bands above the caller's are rotated too, as zeros: bands do
+        // not mix.
+        let mut chunks = [[0.0f32; CHUNK]; ShOrder::MAX.coeff_count() / CHUNK];
+        chunks.as_flattened_mut()[..n].copy_from_slice(coeffs);
+        self.apply_chunks(r, &mut chunks);
+        coeffs.copy_from_slice(&chunks.as_flattened()[..n]);
+    }
+
+    /// [`EulerShRotation::apply`] on this rotation's order's coefficients
+    /// held in `K` chunks, zero-padded past n² (the padding comes out zero);
+    /// `K` must hold them. Always inlined, so that a caller compiled for
+    /// wider SIMD compiles it for the same.
+    ///
+    /// # Panics
+    /// If `K` chunks cannot hold n² coefficients.
+    #[inline(always)]
+    pub fn apply_chunks<const K: usize>(&self, r: Mat3, coeffs: &mut [Chunk; K]) {
+        assert!(
+            K * CHUNK >= self.order.coeff_count(),
+            "{K} chunks cannot hold the coefficients of {}",
+            self.order
+        );
         // R ŷ = (sin β sin α, cos β, sin β cos α).
         let y = r.y_axis;
         let (sin_a, cos_a) = unit_or_x(y.x, y.z);
@@ -213,11 +332,53 @@ impl EulerShRotation {
         let z1 = sin_a * x.x + cos_a * x.z;
         let x1 = cos_a * x.x - sin_a * x.z;
         let (sin_c, cos_c) = unit_or_x(-(-sin_b * x.y + cos_b * z1), x1);
-        polar_turn(coeffs, bands, cos_c, sin_c);
-        band_product(&self.quarter_inverse, coeffs, bands);
-        polar_turn(coeffs, bands, cos_b, sin_b);
-        band_product(&self.quarter, coeffs, bands);
-        polar_turn(coeffs, bands, cos_a, sin_a);
+        self.polar_turn(coeffs, cos_c, sin_c);
+        self.quarter_inverse.apply(coeffs);
+        self.polar_turn(coeffs, cos_b, sin_b);
+        self.quarter.apply(coeffs);
+        self.polar_turn(coeffs, cos_a, sin_a);
+    }
+
+    /// The SH rotation of R_y(θ) (glam's sense: +X toward −Z), given cos θ
+    /// and sin θ. R_y(θ) carries the function at azimuth φ + θ to φ (φ runs
+    /// from +X toward +Z), so the pair (c, s) of cos mφ and sin mφ becomes
+    /// (c cos mθ + s sin mθ, s cos mθ − c sin mθ): coefficient k of order
+    /// m becomes c_k cos |m|θ + sign(m) c_partner sin |m|θ. The multiples
+    /// of the angle come from the angle-addition recurrence, once per turn;
+    /// each lane then selects its own.
+    #[inline(always)]
+    fn polar_turn<const K: usize>(&self, coeffs: &mut [Chunk; K], cos: f32, sin: f32) {
+        let (n, bands) = (self.order.coeff_count(), self.order.bands());
+        let mut multiples = [(1.0f32, 0.0f32); ShOrder::MAX.bands()];
+        for m in 1..bands {
+            let (c, s) = multiples[m - 1];
+            multiples[m] = (c * cos - s * sin, s * cos + c * sin);
+        }
+        let mut partner = [[0.0f32; CHUNK]; K];
+        let flat = coeffs.as_flattened();
+        for (p, &k) in partner.as_flattened_mut()[..n]
+            .iter_mut()
+            .zip(&self.partner)
+        {
+            *p = flat[k as usize];
+        }
+        // Chunks past n² are left as they are (the products zero them).
+        let lanes = self.abs_m.iter().zip(&self.sign_m);
+        for ((coeffs, partner), (abs_m, sign_m)) in coeffs.iter_mut().zip(&partner).zip(lanes) {
+            let mut cos_m = [1.0f32; CHUNK];
+            let mut sin_m = [0.0f32; CHUNK];
+            for (m, &(cos, sin)) in multiples.iter().enumerate().take(bands).skip(1) {
+                let m = m as f32;
+                for i in 0..CHUNK {
+                    let this = abs_m[i] == m;
+                    cos_m[i] = if this { cos } else { cos_m[i] };
+                    sin_m[i] = if this { sin } else { sin_m[i] };
+                }
+            }
+            for i in 0..CHUNK {
+                coeffs[i] = coeffs[i] * cos_m[i] + partner[i] * (sign_m[i] * sin_m[i]);
+            }
+        }
     }
 }
 
@@ -229,42 +390,6 @@ fn unit_or_x(s: f32, c: f32) -> (f32, f32) {
         (s / length, c / length)
     } else {
         (0.0, 1.0)
-    }
-}
-
-/// The SH rotation of R_y(θ) (glam's sense: +X toward −Z) on bands
-/// `0..bands` of `coeffs`, given cos θ and sin θ. R_y(θ) carries the
-/// function at azimuth φ + θ to φ (φ runs from +X toward +Z), so the pair
-/// (c, s) of cos mφ and sin mφ becomes (c cos mθ + s sin mθ,
-/// s cos mθ − c sin mθ).
-#[inline(always)]
-fn polar_turn(coeffs: &mut [f32], bands: usize, cos: f32, sin: f32) {
-    let (mut cos_m, mut sin_m) = (1.0f32, 0.0f32);
-    for m in 1..bands {
-        (cos_m, sin_m) = (cos_m * cos - sin_m * sin, sin_m * cos + cos_m * sin);
-        for l in m..bands {
-            let centre = l * l + l;
-            let (c, s) = (coeffs[centre + m], coeffs[centre - m]);
-            coeffs[centre + m] = c * cos_m + s * sin_m;
-            coeffs[centre - m] = s * cos_m - c * sin_m;
-        }
-    }
-}
-
-/// `coeffs` ← `rotation` · `coeffs` on bands `0..bands`, band by band.
-#[inline(always)]
-fn band_product(rotation: &ShRotation, coeffs: &mut [f32], bands: usize) {
-    let mut block_start = 1;
-    for l in 1..bands {
-        let size = 2 * l + 1;
-        let block = &rotation.blocks[block_start..block_start + size * size];
-        let band = &mut coeffs[l * l..l * l + size];
-        let mut src = [0.0f32; MAX_BAND];
-        src[..size].copy_from_slice(band);
-        for (out, row) in band.iter_mut().zip(block.chunks_exact(size)) {
-            *out = row.iter().zip(&src[..size]).map(|(r, c)| r * c).sum();
-        }
-        block_start += size * size;
     }
 }
 
@@ -549,6 +674,32 @@ mod tests {
         ] {
             check_euler(order, r, 3);
         }
+    }
+
+    /// In chunks, with more chunks than the order needs and garbage in the
+    /// padding: the coefficients are those of [`EulerShRotation::apply`]
+    /// and the padding comes out zero.
+    #[test]
+    fn euler_rotation_in_chunks_zeroes_the_padding() {
+        let order = ShOrder::new(5).unwrap();
+        let rotation = EulerShRotation::new(order);
+        let r = Mat3::from_quat(Quat::from_euler(glam::EulerRot::XYZ, 0.4, -1.2, 2.3));
+        let c = random_coeffs(order, 5);
+        let mut want = c.clone();
+        rotation.apply(r, &mut want);
+        let mut chunks = [[7.0f32; CHUNK]; 4];
+        chunks.as_flattened_mut()[..25].copy_from_slice(&c);
+        rotation.apply_chunks(r, &mut chunks);
+        let flat = chunks.as_flattened();
+        assert_eq!(&flat[..25], &want[..]);
+        assert!(flat[25..].iter().all(|&x| x == 0.0), "{:?}", &flat[25..]);
+    }
+
+    #[test]
+    #[should_panic(expected = "1 chunks cannot hold")]
+    fn euler_rotation_into_too_few_chunks_panics() {
+        EulerShRotation::new(ShOrder::new(5).unwrap())
+            .apply_chunks(Mat3::IDENTITY, &mut [[0.0; CHUNK]; 1]);
     }
 
     #[test]
