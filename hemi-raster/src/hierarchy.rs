@@ -143,7 +143,7 @@ use rayon::prelude::*;
 use shadow_core::{Adjacency, Error, Mesh, Result, Scene};
 
 use crate::config::NearRings;
-use crate::kernel::{Candidates, Corners, Entry};
+use crate::kernel::{Candidates, CoarseLevel, Corners, Entry};
 use crate::rasterize::Blockers;
 
 /// κ of the envelope test that drops a coarse triangle for a receiver too
@@ -314,31 +314,28 @@ impl TwoLevel {
         self.coarse_objects.get(object).map(|r| r.len())
     }
 
-    /// This frame's coarse triangles, laid out for the per-receiver loop.
-    pub(crate) fn corners(&self, blockers: &Blockers) -> Corners {
-        let groups = self
-            .groups
-            .iter()
-            .map(|(range, o)| (range.clone(), blockers.objects[*o].1));
-        Corners::new(blockers, &self.coarse_triangles, groups)
+    /// The coarse level of a frame whose blockers are `blockers`, for
+    /// [`Corners::new`]: the coarse triangles index the original vertices,
+    /// so they follow every pose.
+    pub(crate) fn coarse_level(&self, blockers: &Blockers) -> CoarseLevel<'_> {
+        CoarseLevel {
+            triangles: &self.coarse_triangles,
+            groups: (self.groups.iter())
+                .map(|(range, o)| (range.clone(), blockers.objects[*o].1))
+                .collect(),
+        }
     }
 
-    /// What global vertex `v` rasterizes: its near triangles at full
-    /// resolution (from `fine`, every triangle of the frame) and every coarse
-    /// triangle (`coarse`, from [`TwoLevel::corners`]) but those of its body
-    /// that are too close ([`crate::rasterize`]'s `is_near_chord`, tested
-    /// per frame by the loop). Triangles through `v` itself subtend no solid
-    /// angle and are culled by the loop.
-    pub(crate) fn candidates<'a>(
-        &'a self,
-        coarse: &'a Corners,
-        fine: &'a Corners,
-        v: usize,
-    ) -> Candidates<'a> {
+    /// What global vertex `v` rasterizes in a frame laid out as `corners`
+    /// (with this hierarchy's coarse level): its near triangles at full
+    /// resolution and every coarse triangle but those of its body that are
+    /// too close ([`crate::rasterize`]'s `is_near_chord`, tested per frame
+    /// by the loop). Triangles through `v` itself subtend no solid angle
+    /// and are culled by the loop.
+    pub(crate) fn candidates<'a>(&'a self, corners: &'a Corners, v: usize) -> Candidates<'a> {
         let near = self.near_offsets[v] as usize..self.near_offsets[v + 1] as usize;
         Candidates::TwoLevel {
-            coarse,
-            fine,
+            corners,
             // `NO_GROUP` matches no group.
             own: self.vertex_group[v] as usize,
             near: &self.near[near],

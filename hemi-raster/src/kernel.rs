@@ -110,22 +110,33 @@ fn avx512_feature(name: &str) -> bool {
     }
 }
 
-/// Blocker triangles by corner, struct of arrays (ax, ay, az, bx, …, cz in
-/// world space), each object padded to whole chunks with NaN triangles,
-/// which every test culls. Built once per frame.
+/// A frame's blocker triangles laid out for the loop: every triangle of
+/// the frame (the fine level, object by object), then, with the mesh
+/// hierarchy, its coarse triangles (group by group), each group padded to
+/// whole chunks with NaN triangles, which every test culls. One layout, so
+/// that a triangle of either level is known by its slot alone. Built once
+/// per frame.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Corners {
+    /// By corner, struct of arrays (ax, ay, az, bx, …, cz in world space),
+    /// for reading whole chunks; empty when only listed triangles are read.
     corners: [Vec<f32>; 9],
     /// The same corners by triangle (slot), for reading listed triangles:
     /// one bounds check and one or two cache lines per triangle, where the
     /// columns take nine of each.
     by_slot: Vec<[f32; 9]>,
-    /// Per chunk: the world bounding box of its corners (centre, half size).
+    /// Per chunk, with the columns: the world bounding box of its corners
+    /// (centre, half size).
     boxes: Vec<(Vec3, Vec3)>,
-    /// Real (unpadded) triangles.
-    triangles: usize,
-    /// Per object: its chunks and whether its back faces are culled.
-    objects: Vec<Group>,
+    /// Real (unpadded) fine triangles.
+    fine_triangles: usize,
+    /// Real coarse triangles.
+    coarse_triangles: usize,
+    /// Per group, fine (one per object) then coarse: its chunks and whether
+    /// its back faces are culled.
+    groups: Vec<Group>,
+    /// How many of `groups` are fine.
+    fine_groups: usize,
 }
 
 #[derive(Clone, Debug)]
@@ -134,59 +145,84 @@ struct Group {
     cull: bool,
 }
 
+/// What the loop reads of a [`Corners`]: whole chunks (the columns and
+/// their boxes, and the slots too), or listed triangles only (the slots).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Reading {
+    Chunks,
+    Slots,
+}
+
+/// A frame's coarse level: triangles (vertex indices into the frame's
+/// [`Blockers`]) and their groups, (triangle range, back-face culling).
+pub(crate) struct CoarseLevel<'a> {
+    pub(crate) triangles: &'a [[u32; 3]],
+    pub(crate) groups: Vec<(Range<usize>, bool)>,
+}
+
 impl Corners {
-    /// Gathers `triangles` (vertex indices into `blockers`), object by object
-    /// as `groups` gives them: (triangle range, back-face culling).
+    /// Lays out `blockers`' triangles, object by object, and then those of
+    /// `coarse`, group by group.
     pub(crate) fn new(
         blockers: &Blockers,
-        triangles: &[[u32; 3]],
-        groups: impl IntoIterator<Item = (Range<usize>, bool)>,
+        coarse: Option<&CoarseLevel>,
+        reading: Reading,
     ) -> Corners {
         let mut out = Corners::default();
-        for (range, cull) in groups {
-            out.push(blockers, &triangles[range], cull);
+        for (range, cull) in &blockers.objects {
+            out.push(blockers, &blockers.triangles[range.clone()], *cull, reading);
+        }
+        out.fine_groups = out.groups.len();
+        out.fine_triangles = blockers.triangles.len();
+        if let Some(coarse) = coarse {
+            for (range, cull) in &coarse.groups {
+                out.push(blockers, &coarse.triangles[range.clone()], *cull, reading);
+            }
+            out.coarse_triangles = coarse.triangles.len();
         }
         out
     }
 
-    /// Appends one object's `triangles`, padded to whole chunks, and the
-    /// chunks' boxes.
-    fn push(&mut self, blockers: &Blockers, triangles: &[[u32; 3]], cull: bool) {
-        let first_chunk = self.boxes.len();
-        let start = first_chunk * LANES;
-        self.triangles += triangles.len();
+    /// Appends one group's `triangles`, padded to whole chunks, and (when
+    /// chunks are read) their columns and boxes.
+    fn push(&mut self, blockers: &Blockers, triangles: &[[u32; 3]], cull: bool, reading: Reading) {
+        let start = self.by_slot.len();
         let padded = (start + triangles.len()).next_multiple_of(LANES);
-        for column in &mut self.corners {
-            column.resize(padded, f32::NAN);
-        }
         self.by_slot.resize(padded, [f32::NAN; 9]);
         for (slot, t) in (start..).zip(triangles) {
             for (k, &i) in t.iter().enumerate() {
                 let p = blockers.position(i as usize);
-                for axis in 0..3 {
-                    self.corners[3 * k + axis][slot] = p[axis];
-                    self.by_slot[slot][3 * k + axis] = p[axis];
-                }
+                self.by_slot[slot][3 * k..3 * k + 3].copy_from_slice(&p.to_array());
             }
         }
-        for chunk in first_chunk..padded / LANES {
-            let lanes = chunk * LANES..(chunk + 1) * LANES;
-            // `f32::min`/`max` skip the NaN padding.
-            let extent = |axis: usize| {
-                (0..3).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), k| {
-                    let column = &self.corners[3 * k + axis][lanes.clone()];
-                    (
-                        column.iter().copied().fold(lo, f32::min),
-                        column.iter().copied().fold(hi, f32::max),
-                    )
-                })
-            };
-            let [(x0, x1), (y0, y1), (z0, z1)] = [0, 1, 2].map(extent);
-            let (lo, hi) = (Vec3::new(x0, y0, z0), Vec3::new(x1, y1, z1));
-            self.boxes.push(((lo + hi) * 0.5, (hi - lo) * 0.5));
+        if reading == Reading::Chunks {
+            for column in &mut self.corners {
+                column.resize(padded, f32::NAN);
+            }
+            for slot in start..padded {
+                for (k, column) in self.corners.iter_mut().enumerate() {
+                    column[slot] = self.by_slot[slot][k];
+                }
+            }
+            for chunk in start / LANES..padded / LANES {
+                let lanes = chunk * LANES..(chunk + 1) * LANES;
+                // `f32::min`/`max` skip the NaN padding.
+                let extent = |axis: usize| {
+                    (0..3).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), k| {
+                        let column = &self.corners[3 * k + axis][lanes.clone()];
+                        (
+                            column.iter().copied().fold(lo, f32::min),
+                            column.iter().copied().fold(hi, f32::max),
+                        )
+                    })
+                };
+                let [(x0, x1), (y0, y1), (z0, z1)] = [0, 1, 2].map(extent);
+                let (lo, hi) = (Vec3::new(x0, y0, z0), Vec3::new(x1, y1, z1));
+                self.boxes.push(((lo + hi) * 0.5, (hi - lo) * 0.5));
+            }
         }
-        self.objects.push(Group {
-            chunks: first_chunk..self.boxes.len(),
+        self.groups.push(Group {
+            chunks: start / LANES..padded / LANES,
             cull,
         });
     }
@@ -206,10 +242,6 @@ impl Corners {
             .collect()
     }
 
-    fn slots(&self) -> usize {
-        self.boxes.len() * LANES
-    }
-
     /// Whether `chunk`'s box lies below the receiver's tangent plane.
     #[inline(always)]
     fn below(&self, chunk: usize, frame: &Frame) -> bool {
@@ -217,7 +249,8 @@ impl Corners {
         frame.below(centre, half)
     }
 
-    /// The nine corner columns of `chunk`.
+    /// The nine corner columns of `chunk` (laid out for
+    /// [`Reading::Chunks`]).
     #[inline(always)]
     fn chunk(&self, chunk: usize) -> [&[f32; LANES]; 9] {
         let lanes = chunk * LANES..(chunk + 1) * LANES;
@@ -254,12 +287,20 @@ impl Corners {
         [0, 3, 6].map(|k| Vec3::new(c[k], c[k + 1], c[k + 2]))
     }
 
-    /// The entries of group `o`'s triangles (padding included, which every
+    /// The fine groups (one per object), then the coarse ones.
+    fn fine(&self) -> &[Group] {
+        &self.groups[..self.fine_groups]
+    }
+
+    fn coarse(&self) -> &[Group] {
+        &self.groups[self.fine_groups..]
+    }
+
+    /// The entries of `group`'s triangles (padding included, which every
     /// test culls), with near chords culled when `chords`.
-    fn object_entries(&self, o: usize, chords: bool) -> impl Iterator<Item = Entry> + '_ {
-        let g = &self.objects[o];
-        let slots = g.chunks.start * LANES..g.chunks.end * LANES;
-        slots.map(move |slot| Entry::new(slot as u32, g.cull, chords))
+    fn group_entries(group: &Group, chords: bool) -> impl Iterator<Item = Entry> + '_ {
+        let slots = group.chunks.start * LANES..group.chunks.end * LANES;
+        slots.map(move |slot| Entry::new(slot as u32, group.cull, chords))
     }
 }
 
@@ -311,24 +352,21 @@ impl LaneFlags {
     }
 }
 
-/// What one receiver rasterizes.
+/// What one receiver rasterizes, from one frame's [`Corners`].
 pub(crate) enum Candidates<'a> {
-    /// Every triangle of the frame.
+    /// Every fine triangle of the frame.
     All(&'a Corners),
-    /// §3.2's two levels: the coarse triangles of every body (group of
-    /// `coarse`) but the near chords of the receiver's own (group `own`,
-    /// [`is_near_chord`]), and the near
-    /// fine triangles, given by their slots in `fine` (all the frame's
-    /// triangles, as [`Candidates::All`] has them).
+    /// §3.2's two levels: the coarse triangles of every body (coarse group)
+    /// but the near chords of the receiver's own (coarse group `own`,
+    /// [`is_near_chord`]), and the near fine triangles, listed by slot.
     TwoLevel {
-        coarse: &'a Corners,
-        fine: &'a Corners,
+        corners: &'a Corners,
         own: usize,
         near: &'a [Entry],
     },
     /// A potentially visible set (§3.2, [`crate::pvs`]): listed triangles
-    /// of one or two frame layouts (the coarse and the fine corners).
-    Listed([(&'a Corners, &'a [Entry]); 2]),
+    /// of either level.
+    Listed(&'a Corners, &'a [Entry]),
 }
 
 impl Candidates<'_> {
@@ -336,41 +374,26 @@ impl Candidates<'_> {
     /// "Avg. #Tris" per vertex).
     pub(crate) fn count(&self) -> usize {
         match self {
-            Candidates::All(corners) => corners.triangles,
-            Candidates::TwoLevel { coarse, near, .. } => coarse.triangles + near.len(),
-            Candidates::Listed(lists) => lists.iter().map(|(_, e)| e.len()).sum(),
+            Candidates::All(corners) => corners.fine_triangles,
+            Candidates::TwoLevel { corners, near, .. } => corners.coarse_triangles + near.len(),
+            Candidates::Listed(_, entries) => entries.len(),
         }
     }
 
-    /// Every candidate as (level, entry): what the per-receiver loop
-    /// considers, for building visible sets (not for the loop itself).
-    pub(crate) fn entries(&self) -> Vec<(Level, Entry)> {
+    /// Every candidate: what the per-receiver loop considers, for building
+    /// visible sets (not for the loop itself).
+    pub(crate) fn entries(&self) -> Vec<Entry> {
         match *self {
-            Candidates::All(fine) => (0..fine.objects.len())
-                .flat_map(|o| fine.object_entries(o, false))
-                .map(|e| (Level::Fine, e))
+            Candidates::All(corners) => (corners.fine().iter())
+                .flat_map(|g| Corners::group_entries(g, false))
                 .collect(),
-            Candidates::TwoLevel {
-                coarse, own, near, ..
-            } => (0..coarse.objects.len())
-                .flat_map(|o| coarse.object_entries(o, o == own))
-                .map(|e| (Level::Coarse, e))
-                .chain(near.iter().map(|&e| (Level::Fine, e)))
+            Candidates::TwoLevel { corners, own, near } => (corners.coarse().iter().enumerate())
+                .flat_map(|(o, g)| Corners::group_entries(g, o == own))
+                .chain(near.iter().copied())
                 .collect(),
-            Candidates::Listed([(_, coarse), (_, fine)]) => (coarse.iter())
-                .map(|&e| (Level::Coarse, e))
-                .chain(fine.iter().map(|&e| (Level::Fine, e)))
-                .collect(),
+            Candidates::Listed(_, entries) => entries.to_vec(),
         }
     }
-}
-
-/// Which frame layout an [`Entry`] indexes: the coarse meshes' corners or
-/// the full-resolution ones.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub(crate) enum Level {
-    Coarse,
-    Fine,
 }
 
 /// Per-thread buffers of the loop, reused from receiver to receiver: after
@@ -510,14 +533,12 @@ impl<W: MaskRow> Job<'_, W> {
         let start = scratch.profile.is_some().then(Instant::now);
         let Scratch { survivors, profile } = scratch;
         let slots = match *self.candidates {
-            Candidates::All(corners) => corners.slots(),
-            Candidates::TwoLevel {
-                coarse, near: n, ..
-            } => coarse.slots() + n.len().next_multiple_of(LANES),
-            Candidates::Listed(lists) => lists
-                .iter()
-                .map(|(_, e)| e.len().next_multiple_of(LANES))
-                .sum(),
+            Candidates::All(corners) => corners.fine_triangles + LANES * corners.fine_groups,
+            Candidates::TwoLevel { corners, near, .. } => {
+                let coarse_groups = corners.groups.len() - corners.fine_groups;
+                corners.coarse_triangles + LANES * coarse_groups + near.len() + LANES
+            }
+            Candidates::Listed(_, entries) => entries.len() + LANES,
         };
         fit(survivors, slots);
         // Plain loops and direct calls only: a closure or an iterator
@@ -526,7 +547,7 @@ impl<W: MaskRow> Job<'_, W> {
         let mut count = 0;
         match *self.candidates {
             Candidates::All(corners) => {
-                for g in &corners.objects {
+                for g in corners.fine() {
                     for chunk in g.chunks.clone() {
                         if !corners.below(chunk, &frame) {
                             let c = corners.chunk(chunk);
@@ -536,16 +557,11 @@ impl<W: MaskRow> Job<'_, W> {
                     }
                 }
             }
-            Candidates::TwoLevel {
-                coarse,
-                fine,
-                own,
-                near,
-            } => {
-                for (o, g) in coarse.objects.iter().enumerate() {
+            Candidates::TwoLevel { corners, own, near } => {
+                for (o, g) in corners.coarse().iter().enumerate() {
                     for chunk in g.chunks.clone() {
-                        if !coarse.below(chunk, &frame) {
-                            let c = coarse.chunk(chunk);
+                        if !corners.below(chunk, &frame) {
+                            let c = corners.chunk(chunk);
                             let flags = LaneFlags::splat(g.cull, o == own);
                             setup::<W>(c, &flags, &frame, resolution, survivors, &mut count);
                         }
@@ -553,12 +569,10 @@ impl<W: MaskRow> Job<'_, W> {
                 }
                 // Near triangles are read by slot; their boxes would not
                 // cull them.
-                listed::<W>(fine, near, &frame, resolution, survivors, &mut count);
+                listed::<W>(corners, near, &frame, resolution, survivors, &mut count);
             }
-            Candidates::Listed(lists) => {
-                for (corners, entries) in lists {
-                    listed::<W>(corners, entries, &frame, resolution, survivors, &mut count);
-                }
+            Candidates::Listed(corners, entries) => {
+                listed::<W>(corners, entries, &frame, resolution, survivors, &mut count);
             }
         }
         let setup_end = start.map(|_| Instant::now());
@@ -811,7 +825,20 @@ mod tests {
         let cull = [true, false, true];
         let blockers = Blockers::new(&geometry, &cull);
         let raster = Rasterizer::<W>::new(lut_resolution).unwrap();
-        let all = Corners::new(&blockers, &blockers.triangles, blockers.objects.clone());
+        // A coarse level: every third triangle of each object.
+        let mut coarse_triangles = Vec::new();
+        let mut groups = Vec::new();
+        for (range, cull) in &blockers.objects {
+            let start = coarse_triangles.len();
+            coarse_triangles.extend(blockers.triangles[range.clone()].iter().step_by(3));
+            groups.push((start..coarse_triangles.len(), *cull));
+        }
+        let coarse = CoarseLevel {
+            triangles: &coarse_triangles,
+            groups: groups.clone(),
+        };
+        let layout = Corners::new(&blockers, Some(&coarse), Reading::Chunks);
+        let slots_only = Corners::new(&blockers, Some(&coarse), Reading::Slots);
         let world = |t: [u32; 3]| t.map(|i| blockers.position(i as usize));
         let object_of_vertex = |v: usize| {
             let mut first = 0;
@@ -845,16 +872,7 @@ mod tests {
                     .map(|(t, &tri)| (world(tri), cull[object_of(t)])),
             );
             blocked += usize::from(!truth.is_empty());
-            // A two-level candidate list: every third triangle of each
-            // object as "coarse", every fifth as "near".
-            let mut coarse_triangles = Vec::new();
-            let mut groups = Vec::new();
-            for (range, cull) in &blockers.objects {
-                let start = coarse_triangles.len();
-                coarse_triangles.extend(blockers.triangles[range.clone()].iter().step_by(3));
-                groups.push((start..coarse_triangles.len(), *cull));
-            }
-            let coarse = Corners::new(&blockers, &coarse_triangles, groups.clone());
+            // Two levels: the coarse triangles, and every fifth as "near".
             let own = object_of_vertex(v);
             let near: Vec<u32> = (0..blockers.triangles.len() as u32).step_by(5).collect();
             let local = |t: [u32; 3]| world(t).map(|p| frame.to_local(p));
@@ -888,22 +906,28 @@ mod tests {
                 })
                 .collect();
             let two_level = Candidates::TwoLevel {
-                coarse: &coarse,
-                fine: &all,
+                corners: &layout,
                 own,
                 near: &near_slots,
             };
+            // The same candidates listed by slot, from either reading.
+            let listed = two_level.entries();
             for simd in Simd::available() {
                 let got = receiver_mask(
                     simd,
                     raster.lut(),
                     &frame,
-                    &Candidates::All(&all),
+                    &Candidates::All(&layout),
                     &mut scratch,
                 );
                 assert_eq!(got, truth, "{simd:?}, receiver {v}");
                 let got = receiver_mask(simd, raster.lut(), &frame, &two_level, &mut scratch);
                 assert_eq!(got, two_truth, "{simd:?} two-level, receiver {v}");
+                for corners in [&layout, &slots_only] {
+                    let candidates = Candidates::Listed(corners, &listed);
+                    let got = receiver_mask(simd, raster.lut(), &frame, &candidates, &mut scratch);
+                    assert_eq!(got, two_truth, "{simd:?} listed, receiver {v}");
+                }
             }
         }
         assert!(blocked > 20, "the scene must shadow: {blocked}");

@@ -14,7 +14,7 @@ use shadow_core::{
 
 use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution, Pvs};
 use crate::hierarchy::TwoLevel;
-use crate::kernel::{Candidates, Corners, Scratch, Simd, receiver_mask};
+use crate::kernel::{Candidates, Corners, Reading, Scratch, Simd, receiver_mask};
 use crate::mask::{Mask, MaskRow};
 use crate::pvs::VisibleSets;
 use crate::rasterize::{Blockers, Rasterizer};
@@ -175,13 +175,18 @@ impl<W: MaskRow> Pipeline<W> {
         visible: Option<&VisibleSets>,
         profile: Option<&mut UpdateProfile>,
     ) {
-        let fine = Corners::new(blockers, &blockers.triangles, blockers.objects.clone());
-        let coarse = hierarchy.map(|h| h.corners(blockers));
+        let coarse = hierarchy.map(|h| h.coarse_level(blockers));
+        // Visible sets list every triangle they read.
+        let reading = match visible {
+            Some(_) => Reading::Slots,
+            None => Reading::Chunks,
+        };
+        let corners = Corners::new(blockers, coarse.as_ref(), reading);
         let (lut, simd) = (self.raster.lut(), self.simd);
-        let candidates = |v: usize| match (visible, hierarchy, &coarse) {
-            (Some(sets), _, coarse) => sets.candidates(coarse.as_ref(), &fine, v),
-            (None, Some(h), Some(coarse)) => h.candidates(coarse, &fine, v),
-            _ => Candidates::All(&fine),
+        let candidates = |v: usize| match (visible, hierarchy) {
+            (Some(sets), _) => sets.candidates(&corners, v),
+            (None, Some(h)) => h.candidates(&corners, v),
+            (None, None) => Candidates::All(&corners),
         };
         let mask = |scratch: &mut Scratch, v: usize| {
             receiver_mask(simd, lut, &blockers.frame(v), &candidates(v), scratch)

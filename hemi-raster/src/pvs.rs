@@ -33,16 +33,15 @@ use rayon::prelude::*;
 use shadow_core::{FrameGeometry, Result};
 
 use crate::hierarchy::TwoLevel;
-use crate::kernel::{Candidates, Corners, Entry, Level};
+use crate::kernel::{Candidates, Corners, Entry, Reading};
 use crate::mask::{Mask, MaskRow};
 use crate::rasterize::{Blockers, Rasterizer, edge_planes, is_near_chord};
 
 /// Per receiver, the candidate triangles that showed in some known frame,
-/// for each level of the hierarchy.
+/// by their slots in the frame's [`Corners`] (both levels in one layout).
 #[derive(Clone, Debug)]
 pub(crate) struct VisibleSets {
-    coarse: Csr,
-    fine: Csr,
+    sets: Csr,
 }
 
 /// Per receiver lists, compressed: receiver v's entries are
@@ -62,7 +61,7 @@ impl Csr {
 /// A candidate that survived culling in one frame.
 struct Shown<W: MaskRow> {
     known: bool,
-    key: (Level, Entry),
+    entry: Entry,
     mask: Mask<W>,
 }
 
@@ -76,88 +75,68 @@ impl VisibleSets {
         cull: &[bool],
         hierarchy: Option<&TwoLevel>,
     ) -> Result<VisibleSets> {
-        let mut sets: Vec<Vec<(Level, Entry)>> = Vec::new();
+        let mut sets: Vec<Vec<Entry>> = Vec::new();
         for frame in frames {
             let blockers = Blockers::new(&frame?, cull);
             sets.resize(blockers.vertex_count(), Vec::new());
-            let fine = Corners::new(&blockers, &blockers.triangles, blockers.objects.clone());
-            let coarse = hierarchy.map(|h| h.corners(&blockers));
-            let layouts = [coarse.as_ref().unwrap_or(&fine), &fine];
+            let coarse = hierarchy.map(|h| h.coarse_level(&blockers));
+            let corners = Corners::new(&blockers, coarse.as_ref(), Reading::Chunks);
             sets.par_iter_mut()
                 .enumerate()
                 .for_each_init(Vec::new, |shown, (v, set)| {
-                    let candidates = match (hierarchy, &coarse) {
-                        (Some(h), Some(coarse)) => h.candidates(coarse, &fine, v),
-                        _ => Candidates::All(&fine),
+                    let candidates = match hierarchy {
+                        Some(h) => h.candidates(&corners, v),
+                        None => Candidates::All(&corners),
                     };
-                    grow(raster, &blockers, v, &candidates, layouts, set, shown);
+                    grow(raster, &blockers, v, &candidates, &corners, set, shown);
                 });
         }
-        let empty = || Csr {
+        let mut out = Csr {
             offsets: vec![0],
             entries: Vec::new(),
         };
-        let mut out = VisibleSets {
-            coarse: empty(),
-            fine: empty(),
-        };
         for set in sets {
-            for (level, entry) in set {
-                match level {
-                    Level::Coarse => out.coarse.entries.push(entry),
-                    Level::Fine => out.fine.entries.push(entry),
-                }
-            }
-            for csr in [&mut out.coarse, &mut out.fine] {
-                csr.offsets.push(csr.entries.len() as u32);
-            }
+            out.entries.extend(set);
+            out.offsets.push(out.entries.len() as u32);
         }
-        Ok(out)
+        Ok(VisibleSets { sets: out })
     }
 
-    /// What receiver `v` rasterizes in a frame laid out as `coarse` (the
-    /// hierarchy's, when there is one) and `fine`.
-    pub(crate) fn candidates<'a>(
-        &'a self,
-        coarse: Option<&'a Corners>,
-        fine: &'a Corners,
-        v: usize,
-    ) -> Candidates<'a> {
-        Candidates::Listed([
-            (coarse.unwrap_or(fine), self.coarse.of(v)),
-            (fine, self.fine.of(v)),
-        ])
+    /// What receiver `v` rasterizes in a frame laid out as `corners` (with
+    /// the hierarchy's coarse level, when there is one, as the sets were
+    /// built).
+    pub(crate) fn candidates<'a>(&'a self, corners: &'a Corners, v: usize) -> Candidates<'a> {
+        Candidates::Listed(corners, self.sets.of(v))
     }
 }
 
 /// Adds to `set` (sorted) the candidates of receiver `v` that show in this
-/// frame (module docs); `layouts` are the frame's coarse and fine corners.
+/// frame (module docs), laid out in `corners`.
 fn grow<W: MaskRow>(
     raster: &Rasterizer<W>,
     blockers: &Blockers,
     v: usize,
     candidates: &Candidates,
-    layouts: [&Corners; 2],
-    set: &mut Vec<(Level, Entry)>,
+    corners: &Corners,
+    set: &mut Vec<Entry>,
     shown: &mut Vec<Shown<W>>,
 ) {
     let frame = blockers.frame(v);
     shown.clear();
     let mut covered = Mask::EMPTY;
-    for key @ (level, entry) in candidates.entries() {
-        let corners = layouts[level as usize].triangle(entry.slot());
-        let local = corners.map(|p| frame.to_local(p));
+    for entry in candidates.entries() {
+        let local = corners.triangle(entry.slot()).map(|p| frame.to_local(p));
         let planes = edge_planes(local, entry.cull());
         if !planes.kept || entry.chords() && is_near_chord(local, planes.behind) {
             continue;
         }
         let mut mask = Mask::EMPTY;
         raster.draw(local, entry.cull(), &mut mask);
-        let known = set.binary_search(&key).is_ok();
+        let known = set.binary_search(&entry).is_ok();
         if known {
             covered = covered.or(&mask);
         }
-        shown.push(Shown { known, key, mask });
+        shown.push(Shown { known, entry, mask });
     }
     // Greedy set cover, lazily: the candidate that adds the most pixels
     // first. A gain only falls as pixels get covered, so a popped gain that
@@ -174,7 +153,7 @@ fn grow<W: MaskRow>(
         let now = shown[i].mask.and_not(&covered).count();
         if now == gain {
             covered = covered.or(&shown[i].mask);
-            set.push(shown[i].key);
+            set.push(shown[i].entry);
         } else if now > 0 {
             gains.push((now, Reverse(i)));
         }
