@@ -21,8 +21,10 @@
 //! - [`Integration::ShBlocks`] (the paper's §3.2 optimization): the mask is
 //!   downsampled in 4×4 blocks to a grey occlusion level (the block's count
 //!   of blocked pixels), and each block counts at the mean direction of its
-//!   disk pixels. Here it saves no time (the tables below make every pixel
-//!   as cheap) and costs accuracy, most near the horizon, where the disk
+//!   disk pixels. With the tables below it saves a fifth of the
+//!   integration (on the harness's human with potentially visible sets,
+//!   0.96 against 1.22 ms an update on one thread) and costs 2 points of
+//!   transfer error (README), most near the horizon, where the disk
 //!   (ρ = sin θ) squeezes elevation: a 4×4 block of the 32×32 mask spans
 //!   14° of elevation at the zenith, an outermost one 49° to 90°. It is
 //!   kept to reproduce the paper and measure what it cost (README).
