@@ -296,6 +296,11 @@ impl Corners {
         &self.groups[self.fine_groups..]
     }
 
+    /// The slots of `groups`, padding included.
+    fn slots(groups: &[Group]) -> usize {
+        groups.iter().map(|g| g.chunks.len() * LANES).sum()
+    }
+
     /// The entries of `group`'s triangles (padding included, which every
     /// test culls), with near chords culled when `chords`.
     fn group_entries(group: &Group, chords: bool) -> impl Iterator<Item = Entry> + '_ {
@@ -533,12 +538,11 @@ impl<W: MaskRow> Job<'_, W> {
         let start = scratch.profile.is_some().then(Instant::now);
         let Scratch { survivors, profile } = scratch;
         let slots = match *self.candidates {
-            Candidates::All(corners) => corners.fine_triangles + LANES * corners.fine_groups,
+            Candidates::All(corners) => Corners::slots(corners.fine()),
             Candidates::TwoLevel { corners, near, .. } => {
-                let coarse_groups = corners.groups.len() - corners.fine_groups;
-                corners.coarse_triangles + LANES * coarse_groups + near.len() + LANES
+                Corners::slots(corners.coarse()) + near.len().next_multiple_of(LANES)
             }
-            Candidates::Listed(_, entries) => entries.len() + LANES,
+            Candidates::Listed(_, entries) => entries.len().next_multiple_of(LANES),
         };
         fit(survivors, slots);
         // Plain loops and direct calls only: a closure or an iterator

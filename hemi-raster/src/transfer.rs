@@ -296,36 +296,31 @@ impl<const K: usize> TableSum<K> {
         TableSum([[0.0; CHUNK]; K])
     }
 
+    /// Entry `entry` of `table`: its `K` chunks.
+    #[inline(always)]
+    fn entry(table: &[Chunk], entry: usize) -> &[Chunk; K] {
+        table[entry * K..(entry + 1) * K]
+            .try_into()
+            .expect("whole entries")
+    }
+
     /// The sum holding entry `entry` of `table`.
     #[inline(always)]
     fn of(table: &[Chunk], entry: usize) -> Self {
-        TableSum(
-            table[entry * K..(entry + 1) * K]
-                .try_into()
-                .expect("whole entries"),
-        )
+        TableSum(*Self::entry(table, entry))
     }
 
-    /// Adds entry `entry` of `table`.
+    /// Adds entry `entry` of `table` (a product by one, which compiles to
+    /// none).
     #[inline(always)]
     fn add(&mut self, table: &[Chunk], entry: usize) {
-        let e: &[Chunk; K] = table[entry * K..(entry + 1) * K]
-            .try_into()
-            .expect("whole entries");
-        for (s, e) in self.0.iter_mut().zip(e) {
-            for (s, e) in s.iter_mut().zip(e) {
-                *s += e;
-            }
-        }
+        self.add_scaled(table, entry, 1.0);
     }
 
     /// Adds `weight` times entry `entry` of `table`.
     #[inline(always)]
     fn add_scaled(&mut self, table: &[Chunk], entry: usize, weight: f32) {
-        let e: &[Chunk; K] = table[entry * K..(entry + 1) * K]
-            .try_into()
-            .expect("whole entries");
-        for (s, e) in self.0.iter_mut().zip(e) {
+        for (s, e) in self.0.iter_mut().zip(Self::entry(table, entry)) {
             for (s, e) in s.iter_mut().zip(e) {
                 *s += weight * e;
             }
@@ -452,40 +447,28 @@ pub(crate) fn lambert_transfer_on<W: MaskRow>(
     blocks: bool,
     out: &mut [f32],
 ) {
-    #[cfg(target_arch = "x86_64")]
     match simd {
-        Simd::Avx512 => {
-            #[target_feature(enable = "avx512f,avx2,fma,bmi1")]
-            fn avx512<W: MaskRow>(
-                basis: &TangentBasis<W>,
-                mask: &Mask<W>,
-                frame: &TangentFrame,
-                blocks: bool,
-                out: &mut [f32],
-            ) {
-                basis.lambert(mask, frame, blocks, out);
-            }
-            // SAFETY: `Simd::resolve` only yields this path on CPUs with AVX-512F.
-            return unsafe { avx512(basis, mask, frame, blocks, out) };
-        }
-        Simd::Avx2 => {
-            #[target_feature(enable = "avx2,fma,bmi1")]
-            fn avx2<W: MaskRow>(
-                basis: &TangentBasis<W>,
-                mask: &Mask<W>,
-                frame: &TangentFrame,
-                blocks: bool,
-                out: &mut [f32],
-            ) {
-                basis.lambert(mask, frame, blocks, out);
-            }
-            // SAFETY: `Simd::resolve` only yields this path on CPUs with AVX2.
-            return unsafe { avx2(basis, mask, frame, blocks, out) };
-        }
-        Simd::Auto | Simd::Portable => {}
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Simd::resolve` only yields this path on CPUs with AVX-512F.
+        Simd::Avx512 => unsafe { basis.lambert_avx512(mask, frame, blocks, out) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Simd::resolve` only yields this path on CPUs with AVX2.
+        Simd::Avx2 => unsafe { basis.lambert_avx2(mask, frame, blocks, out) },
+        _ => basis.lambert(mask, frame, blocks, out),
     }
-    let _ = simd;
-    basis.lambert(mask, frame, blocks, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<W: MaskRow> TangentBasis<W> {
+    #[target_feature(enable = "avx512f,avx2,fma,bmi1")]
+    fn lambert_avx512(&self, mask: &Mask<W>, frame: &TangentFrame, blocks: bool, out: &mut [f32]) {
+        self.lambert(mask, frame, blocks, out);
+    }
+
+    #[target_feature(enable = "avx2,fma,bmi1")]
+    fn lambert_avx2(&self, mask: &Mask<W>, frame: &TangentFrame, blocks: bool, out: &mut [f32]) {
+        self.lambert(mask, frame, blocks, out);
+    }
 }
 
 /// The specular lobe of [`shadow_core::Brdf::Phong`] at one vertex for one
