@@ -81,8 +81,9 @@ pub enum Hierarchy {
         /// of it in the scene's first frame, wherever they are on the
         /// surface (the paper's §4.1 "Accuracy of Local Geometry": eyes in
         /// their sockets, arms against the body); objects touching within
-        /// that reach form one body. 0 keeps the rings (and the fine
-        /// triangles of the coarse triangles too close to the receiver).
+        /// that reach form one body. 0 keeps the rings only (coarse
+        /// triangles too close to the receiver are still replaced by their
+        /// fine triangles, per frame).
         near_reach: u8,
     },
 }

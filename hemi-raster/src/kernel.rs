@@ -7,10 +7,12 @@
 //!    receiver's frame and culling them), 16 triangles at a time with no
 //!    per-triangle branch: the three corners go into the tangent frame, the
 //!    triangle is culled below the horizon, through the receiver, as a back
-//!    face or as a near chord of the receiver's own body (its object, or
-//!    the touching parts it belongs to; see [`is_near_chord`]), the three edge-plane normals are computed and
-//!    turned into plane-table cells (skipped when the whole chunk is
-//!    culled), and the survivors' cells are appended to a list.
+//!    face, as one the receiver skips, or as a near chord of the receiver's
+//!    own body (its object, or the touching parts it belongs to), which is
+//!    replaced by the fine triangles it stands for ([`replaced`]); the three
+//!    edge-plane normals are computed and turned into plane-table cells
+//!    (skipped when the whole chunk is culled), and the survivors' cells are
+//!    appended to a list.
 //! 2. **Lookup** (the paper's "rasterization"): per survivor, the three plane
 //!    masks are ANDed and ORed into the visibility mask, one whole mask row
 //!    per SIMD lane.
@@ -42,9 +44,10 @@ use std::time::{Duration, Instant};
 use glam::{Mat3, Vec3};
 use shadow_core::{Error, Result};
 
+use crate::csr::Csr;
 use crate::lut::{PlaneLut, plane_code, row_code};
 use crate::mask::{Mask, MaskRow};
-use crate::rasterize::{Blockers, TangentFrame, edge_planes, is_near_chord};
+use crate::rasterize::{Blockers, TangentFrame, edge_planes, replaced};
 
 /// Triangles per setup chunk, and per cluster.
 pub(crate) const LANES: usize = 16;
@@ -296,6 +299,12 @@ impl Corners {
         &self.groups[self.fine_groups..]
     }
 
+    /// The slot of the coarse level's first triangle: coarse triangles are
+    /// known to the hierarchy by their slot from there.
+    fn coarse_base(&self) -> usize {
+        Corners::slots(self.fine())
+    }
+
     /// The slots of `groups`, padding included.
     fn slots(groups: &[Group]) -> usize {
         groups.iter().map(|g| g.chunks.len() * LANES).sum()
@@ -341,10 +350,13 @@ impl Entry {
     }
 }
 
-/// Per lane of a setup chunk: whether back faces and near chords are culled.
+/// Per lane of a setup chunk: whether back faces are culled, whether near
+/// chords are dropped (and replaced), and (one bit per lane) whether the
+/// receiver skips the triangle outright.
 struct LaneFlags {
     cull: [bool; LANES],
     chords: [bool; LANES],
+    skip: u32,
 }
 
 impl LaneFlags {
@@ -353,6 +365,7 @@ impl LaneFlags {
         LaneFlags {
             cull: [cull; LANES],
             chords: [chords; LANES],
+            skip: 0,
         }
     }
 }
@@ -362,41 +375,92 @@ pub(crate) enum Candidates<'a> {
     /// Every fine triangle of the frame.
     All(&'a Corners),
     /// §3.2's two levels: the coarse triangles of every body (coarse group)
-    /// but the near chords of the receiver's own (coarse group `own`,
-    /// [`is_near_chord`]), and the near fine triangles, listed by slot.
+    /// but those the receiver skips (`excluded`, by slot from the coarse
+    /// level's first) and the near chords of its own (coarse group `own`),
+    /// which [`replaced`] swaps for their `regions`; and the near fine
+    /// triangles, listed by slot.
     TwoLevel {
         corners: &'a Corners,
         own: usize,
         near: &'a [Entry],
+        excluded: &'a [u32],
+        regions: &'a Csr<Entry>,
     },
     /// A potentially visible set (§3.2, [`crate::pvs`]): listed triangles
-    /// of either level.
-    Listed(&'a Corners, &'a [Entry]),
+    /// of either level; with two levels, the `regions` that replace the
+    /// near chords listed.
+    Listed {
+        corners: &'a Corners,
+        entries: &'a [Entry],
+        regions: Option<&'a Csr<Entry>>,
+    },
 }
 
 impl Candidates<'_> {
-    /// How many triangles the receiver considers (the paper's Table 1
-    /// "Avg. #Tris" per vertex).
+    /// How many triangles the receiver considers before any frame is seen
+    /// (the paper's Table 1 "Avg. #Tris" per vertex, but for the fine
+    /// triangles that replace near chords, which the loop counts per frame).
     pub(crate) fn count(&self) -> usize {
         match self {
             Candidates::All(corners) => corners.fine_triangles,
-            Candidates::TwoLevel { corners, near, .. } => corners.coarse_triangles + near.len(),
-            Candidates::Listed(_, entries) => entries.len(),
+            Candidates::TwoLevel {
+                corners,
+                near,
+                excluded,
+                ..
+            } => corners.coarse_triangles - excluded.len() + near.len(),
+            Candidates::Listed { entries, .. } => entries.len(),
         }
     }
 
-    /// Every candidate: what the per-receiver loop considers, for building
-    /// visible sets (not for the loop itself).
+    /// Every candidate that does not depend on the frame: what the
+    /// per-receiver loop considers, for building visible sets (not for the
+    /// loop itself). With two levels, add the [`Candidates::replacements`]
+    /// of the coarse triangles [`replaced`] in the frame.
     pub(crate) fn entries(&self) -> Vec<Entry> {
         match *self {
             Candidates::All(corners) => (corners.fine().iter())
                 .flat_map(|g| Corners::group_entries(g, false))
                 .collect(),
-            Candidates::TwoLevel { corners, own, near } => (corners.coarse().iter().enumerate())
-                .flat_map(|(o, g)| Corners::group_entries(g, o == own))
-                .chain(near.iter().copied())
-                .collect(),
-            Candidates::Listed(_, entries) => entries.to_vec(),
+            Candidates::TwoLevel {
+                corners,
+                own,
+                near,
+                excluded,
+                ..
+            } => {
+                let base = corners.coarse_base();
+                (corners.coarse().iter().enumerate())
+                    .flat_map(|(o, g)| Corners::group_entries(g, o == own))
+                    .filter(|e| excluded.binary_search(&((e.slot() - base) as u32)).is_err())
+                    .chain(near.iter().copied())
+                    .collect()
+            }
+            Candidates::Listed { entries, .. } => entries.to_vec(),
+        }
+    }
+
+    /// The fine triangles that replace candidate `entry` when the frame
+    /// finds it [`replaced`]: its region for a coarse triangle of the
+    /// receiver's own body, nothing otherwise.
+    pub(crate) fn replacements(&self, entry: Entry) -> &[Entry] {
+        match (self.regions(), entry.chords()) {
+            (Some((corners, regions)), true) => regions.of(entry.slot() - corners.coarse_base()),
+            _ => &[],
+        }
+    }
+
+    /// The layout and regions of the replacements, with two levels.
+    #[inline(always)]
+    fn regions(&self) -> Option<(&Corners, &Csr<Entry>)> {
+        match *self {
+            Candidates::All(_) => None,
+            Candidates::TwoLevel {
+                corners, regions, ..
+            } => Some((corners, regions)),
+            Candidates::Listed {
+                corners, regions, ..
+            } => regions.map(|r| (corners, r)),
         }
     }
 }
@@ -407,6 +471,12 @@ impl Candidates<'_> {
 pub(crate) struct Scratch {
     /// Three plane-cell codes per surviving triangle.
     survivors: Vec<u32>,
+    /// The coarse triangles replaced in this frame, by slot from the coarse
+    /// level's first.
+    replaced: Vec<u32>,
+    /// The listed triangles of a two-level receiver: near ones, then the
+    /// replacements.
+    listed: Vec<Entry>,
     /// Time and counts of the two phases, when profiling.
     profile: Option<LoopProfile>,
 }
@@ -435,6 +505,8 @@ pub(crate) struct LoopProfile {
     pub(crate) rasterization: Duration,
     /// Triangles that survived culling and were looked up.
     pub(crate) survivors: u64,
+    /// Fine triangles listed in place of replaced coarse ones.
+    pub(crate) replacements: u64,
 }
 
 /// The visibility mask of the receiver with tangent frame `frame`, on the
@@ -536,15 +608,22 @@ impl<W: MaskRow> Job<'_, W> {
         let frame = Frame::new(self.frame.origin(), m);
         let resolution = self.lut.resolution() as u32;
         let start = scratch.profile.is_some().then(Instant::now);
-        let Scratch { survivors, profile } = scratch;
+        let Scratch {
+            survivors,
+            replaced,
+            listed: listed_entries,
+            profile,
+        } = scratch;
         let slots = match *self.candidates {
             Candidates::All(corners) => Corners::slots(corners.fine()),
             Candidates::TwoLevel { corners, near, .. } => {
                 Corners::slots(corners.coarse()) + near.len().next_multiple_of(LANES)
             }
-            Candidates::Listed(_, entries) => entries.len().next_multiple_of(LANES),
+            Candidates::Listed { entries, .. } => entries.len().next_multiple_of(LANES),
         };
+        // The replacements are not known yet: `fit` again for them below.
         fit(survivors, slots);
+        replaced.clear();
         // Plain loops and direct calls only: a closure or an iterator
         // adaptor here would be compiled apart from the `target_feature`
         // function, for the baseline instruction set.
@@ -561,22 +640,75 @@ impl<W: MaskRow> Job<'_, W> {
                     }
                 }
             }
-            Candidates::TwoLevel { corners, own, near } => {
+            Candidates::TwoLevel {
+                corners,
+                own,
+                near,
+                excluded,
+                ..
+            } => {
+                let first = corners.coarse_base() / LANES;
+                let mut next = 0;
                 for (o, g) in corners.coarse().iter().enumerate() {
                     for chunk in g.chunks.clone() {
+                        // The chunk's excluded lanes (the list is sorted).
+                        let base = (chunk - first) * LANES;
+                        let mut skip = 0u32;
+                        while next < excluded.len() && (excluded[next] as usize) < base + LANES {
+                            skip |= 1 << (excluded[next] as usize - base);
+                            next += 1;
+                        }
                         if !corners.below(chunk, &frame) {
                             let c = corners.chunk(chunk);
-                            let flags = LaneFlags::splat(g.cull, o == own);
-                            setup::<W>(c, &flags, &frame, resolution, survivors, &mut count);
+                            let mut flags = LaneFlags::splat(g.cull, o == own);
+                            flags.skip = skip;
+                            let mut bits =
+                                setup::<W>(c, &flags, &frame, resolution, survivors, &mut count);
+                            while bits != 0 {
+                                replaced.push((base + bits.trailing_zeros() as usize) as u32);
+                                bits &= bits - 1;
+                            }
                         }
                     }
                 }
                 // Near triangles are read by slot; their boxes would not
                 // cull them.
-                listed::<W>(corners, near, &frame, resolution, survivors, &mut count);
+                listed::<W>(
+                    corners, near, &frame, resolution, survivors, &mut count, replaced,
+                );
             }
-            Candidates::Listed(corners, entries) => {
-                listed::<W>(corners, entries, &frame, resolution, survivors, &mut count);
+            Candidates::Listed {
+                corners, entries, ..
+            } => {
+                listed::<W>(
+                    corners, entries, &frame, resolution, survivors, &mut count, replaced,
+                );
+            }
+        }
+        // The fine triangles that stand for the coarse ones replaced (none
+        // of them a coarse triangle, so none replaced in turn).
+        if let Some((corners, regions)) = self.candidates.regions()
+            && !replaced.is_empty()
+        {
+            listed_entries.clear();
+            for &c in replaced.iter() {
+                listed_entries.extend_from_slice(regions.of(c as usize));
+            }
+            fit(
+                survivors,
+                count / 3 + listed_entries.len().next_multiple_of(LANES),
+            );
+            listed::<W>(
+                corners,
+                listed_entries,
+                &frame,
+                resolution,
+                survivors,
+                &mut count,
+                replaced,
+            );
+            if let Some(p) = profile.as_mut() {
+                p.replacements += listed_entries.len() as u64;
             }
         }
         let setup_end = start.map(|_| Instant::now());
@@ -669,6 +801,8 @@ fn fit(survivors: &mut Vec<u32>, slots: usize) {
 
 /// Phase 1 on listed triangles, 16 at a time, read by slot from `corners`.
 #[inline(always)]
+/// The near chords [`replaced`] are appended to `replaced`, by slot from the
+/// coarse level's first.
 fn listed<W: MaskRow>(
     corners: &Corners,
     entries: &[Entry],
@@ -676,19 +810,26 @@ fn listed<W: MaskRow>(
     resolution: u32,
     survivors: &mut [u32],
     count: &mut usize,
+    replaced: &mut Vec<u32>,
 ) {
     let mut columns = [[0.0f32; LANES]; 9];
     let mut flags = LaneFlags::splat(false, false);
     for entries in entries.chunks(LANES) {
         corners.gather(entries, &mut columns, &mut flags);
         let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
-        setup::<W>(c, &flags, frame, resolution, survivors, count);
+        let mut bits = setup::<W>(c, &flags, frame, resolution, survivors, count);
+        while bits != 0 {
+            let slot = entries[bits.trailing_zeros() as usize].slot();
+            replaced.push((slot - corners.coarse_base()) as u32);
+            bits &= bits - 1;
+        }
     }
 }
 
 /// Phase 1 on one chunk, given by its nine corner columns: appends the plane
 /// codes of its surviving triangles at `survivors[*count..]`, culling back
-/// faces and near chords ([`is_near_chord`]) in the lanes `flags` says.
+/// faces and the skipped lanes, and dropping near chords, in the lanes
+/// `flags` says. Returns the lanes [`replaced`] (one bit each).
 /// Straight-line code over fixed-size arrays: the compiler turns the first
 /// loop into SIMD instructions, 16 triangles per pass.
 #[inline(always)]
@@ -699,7 +840,7 @@ fn setup<W: MaskRow>(
     resolution: u32,
     survivors: &mut [u32],
     count: &mut usize,
-) {
+) -> u32 {
     // Each step is a short loop over the lanes with arrays in and out: the
     // shape the vectorizer turns into a few SIMD instructions per step.
     let mut local = [[0.0f32; LANES]; 9];
@@ -713,6 +854,7 @@ fn setup<W: MaskRow>(
     }
     let mut planes = [[0.0f32; LANES]; 9];
     let mut keep = [false; LANES];
+    let mut above = [false; LANES];
     let mut behind = [false; LANES];
     for l in 0..LANES {
         let e = edge_planes(lane(&local, l), flags.cull[l]);
@@ -721,7 +863,8 @@ fn setup<W: MaskRow>(
             planes[3 * k + 1][l] = m.y;
             planes[3 * k + 2][l] = m.z;
         }
-        keep[l] = e.kept;
+        keep[l] = e.kept & (flags.skip >> l & 1 == 0);
+        above[l] = e.above;
         behind[l] = e.behind;
     }
     // The chord test only where a lane asks for it (the receiver's own
@@ -730,9 +873,14 @@ fn setup<W: MaskRow>(
     for &c in &flags.chords {
         chords |= c;
     }
+    let mut gone = 0u32;
     if chords {
         for l in 0..LANES {
-            keep[l] &= !(flags.chords[l] & is_near_chord(lane(&local, l), behind[l]));
+            let swap = flags.chords[l]
+                & (flags.skip >> l & 1 == 0)
+                & replaced(lane(&local, l), above[l], behind[l]);
+            gone |= u32::from(swap) << l;
+            keep[l] &= !swap;
         }
     }
     // Coherent chunks are often culled whole (a back-facing patch, a patch
@@ -742,7 +890,7 @@ fn setup<W: MaskRow>(
         survived |= u32::from(k) << l;
     }
     if survived == 0 {
-        return;
+        return gone;
     }
     let mut codes = [[0u32; LANES]; 3];
     for (e, codes) in codes.iter_mut().enumerate() {
@@ -759,6 +907,7 @@ fn setup<W: MaskRow>(
         survivors[*count..*count + 3].copy_from_slice(&[codes[0][l], codes[1][l], codes[2][l]]);
         *count += 3;
     }
+    gone
 }
 
 /// Lane `l`'s triangle from nine corner columns.
@@ -831,14 +980,36 @@ mod tests {
         let cull = [true, false, true];
         let blockers = Blockers::new(&geometry, &cull);
         let raster = Rasterizer::<W>::new(lut_resolution).unwrap();
-        // A coarse level: every third triangle of each object.
+        let bases = Corners::slot_bases(blockers.objects.iter().map(|(r, _)| r.len()));
+        let object_of = |t: usize| {
+            blockers
+                .objects
+                .iter()
+                .position(|(r, _)| r.contains(&t))
+                .unwrap()
+        };
+        let entry = |t: usize, chords: bool| {
+            let o = object_of(t);
+            let slot = bases[o] as usize + t - blockers.objects[o].0.start;
+            Entry::new(slot as u32, cull[o], chords)
+        };
+        // A coarse level: every third triangle of each object, standing for
+        // itself and the two after it (its region), by coarse slot.
         let mut coarse_triangles = Vec::new();
         let mut groups = Vec::new();
+        let mut regions = Vec::new();
         for (range, cull) in &blockers.objects {
             let start = coarse_triangles.len();
-            coarse_triangles.extend(blockers.triangles[range.clone()].iter().step_by(3));
+            for t in range.clone().step_by(3) {
+                coarse_triangles.push(blockers.triangles[t]);
+                regions.push((t..(t + 3).min(range.end)).collect::<Vec<_>>());
+            }
             groups.push((start..coarse_triangles.len(), *cull));
+            regions.resize(regions.len().next_multiple_of(LANES), Vec::new());
         }
+        let region_entries = Csr::from_lists(
+            (regions.iter()).map(|r| r.iter().map(|&t| entry(t, false)).collect::<Vec<_>>()),
+        );
         let coarse = CoarseLevel {
             triangles: &coarse_triangles,
             groups: groups.clone(),
@@ -857,15 +1028,8 @@ mod tests {
                 })
                 .unwrap()
         };
-        let object_of = |t: usize| {
-            blockers
-                .objects
-                .iter()
-                .position(|(r, _)| r.contains(&t))
-                .unwrap()
-        };
         let mut scratch = Scratch::default();
-        let mut blocked = 0;
+        let (mut blocked, mut swapped) = (0, 0);
         for v in (0..blockers.vertex_count()).step_by(7) {
             let frame = blockers.frame(v);
             let truth = reference(
@@ -878,46 +1042,51 @@ mod tests {
                     .map(|(t, &tri)| (world(tri), cull[object_of(t)])),
             );
             blocked += usize::from(!truth.is_empty());
-            // Two levels: the coarse triangles, and every fifth as "near".
+            // Two levels: the coarse triangles but every seventh coarse slot
+            // (excluded), the own object's near chords replaced by their
+            // regions, and every fifth triangle as "near".
             let own = object_of_vertex(v);
-            let near: Vec<u32> = (0..blockers.triangles.len() as u32).step_by(5).collect();
+            let near: Vec<usize> = (0..blockers.triangles.len()).step_by(5).collect();
+            let excluded: Vec<u32> = (v as u32 % 7..regions.len() as u32).step_by(7).collect();
             let local = |t: [u32; 3]| world(t).map(|p| frame.to_local(p));
+            let mut listed = near.clone();
+            let mut coarse_kept = Vec::new();
+            let mut slot = 0;
+            for (o, (range, cull)) in groups.iter().enumerate() {
+                for (k, &t) in coarse_triangles[range.clone()].iter().enumerate() {
+                    if excluded.binary_search(&((slot + k) as u32)).is_ok() {
+                        continue;
+                    }
+                    let planes = edge_planes(local(t), *cull);
+                    if o == own && replaced(local(t), planes.above, planes.behind) {
+                        listed.extend(&regions[slot + k]);
+                        swapped += 1;
+                    } else {
+                        coarse_kept.push((world(t), *cull));
+                    }
+                }
+                slot += range.len().next_multiple_of(LANES);
+            }
             let two_truth = reference(
                 &raster,
                 &frame,
-                groups
-                    .iter()
-                    .enumerate()
-                    .flat_map(|(o, (range, cull))| {
-                        coarse_triangles[range.clone()]
-                            .iter()
-                            .filter_map(move |&t| {
-                                let chord = o == own
-                                    && is_near_chord(local(t), edge_planes(local(t), *cull).behind);
-                                (!chord).then_some((world(t), *cull))
-                            })
-                    })
-                    .chain(
-                        near.iter()
-                            .map(|&t| (world(blockers.triangles[t as usize]), cull[own])),
-                    ),
+                coarse_kept.into_iter().chain(
+                    listed
+                        .iter()
+                        .map(|&t| (world(blockers.triangles[t]), cull[object_of(t)])),
+                ),
             );
-            let bases = Corners::slot_bases(blockers.objects.iter().map(|(r, _)| r.len()));
-            let near_slots: Vec<Entry> = near
-                .iter()
-                .map(|&t| {
-                    let o = object_of(t as usize);
-                    let slot = bases[o] + t - blockers.objects[o].0.start as u32;
-                    Entry::new(slot, cull[own], false)
-                })
-                .collect();
+            let near_slots: Vec<Entry> = near.iter().map(|&t| entry(t, false)).collect();
             let two_level = Candidates::TwoLevel {
                 corners: &layout,
                 own,
                 near: &near_slots,
+                excluded: &excluded,
+                regions: &region_entries,
             };
-            // The same candidates listed by slot, from either reading.
-            let listed = two_level.entries();
+            // The same candidates listed by slot, from either reading: the
+            // listed near chords are replaced as the frame finds them.
+            let entries = two_level.entries();
             for simd in Simd::available() {
                 let got = receiver_mask(
                     simd,
@@ -930,13 +1099,18 @@ mod tests {
                 let got = receiver_mask(simd, raster.lut(), &frame, &two_level, &mut scratch);
                 assert_eq!(got, two_truth, "{simd:?} two-level, receiver {v}");
                 for corners in [&layout, &slots_only] {
-                    let candidates = Candidates::Listed(corners, &listed);
+                    let candidates = Candidates::Listed {
+                        corners,
+                        entries: &entries,
+                        regions: Some(&region_entries),
+                    };
                     let got = receiver_mask(simd, raster.lut(), &frame, &candidates, &mut scratch);
                     assert_eq!(got, two_truth, "{simd:?} listed, receiver {v}");
                 }
             }
         }
         assert!(blocked > 20, "the scene must shadow: {blocked}");
+        assert!(swapped > 20, "near chords must be replaced: {swapped}");
     }
 
     #[test]

@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 mod config;
+mod csr;
 mod disk;
 mod hierarchy;
 mod kernel;

@@ -184,7 +184,7 @@ impl<W: MaskRow> Pipeline<W> {
         let corners = Corners::new(blockers, coarse.as_ref(), reading);
         let (lut, simd) = (self.raster.lut(), self.simd);
         let candidates = |v: usize| match (visible, hierarchy) {
-            (Some(sets), _) => sets.candidates(&corners, v),
+            (Some(sets), h) => sets.candidates(&corners, h, v),
             (None, Some(h)) => h.candidates(&corners, v),
             (None, None) => Candidates::All(&corners),
         };
@@ -210,6 +210,7 @@ impl<W: MaskRow> Pipeline<W> {
                 profile.transform = phases.transform;
                 profile.rasterization = phases.rasterization;
                 profile.survivors = phases.survivors;
+                profile.candidates += phases.replacements;
                 profile.receivers = receivers.len();
                 masks
             }

@@ -32,30 +32,18 @@ use std::collections::BinaryHeap;
 use rayon::prelude::*;
 use shadow_core::{FrameGeometry, Result};
 
+use crate::csr::Csr;
 use crate::hierarchy::TwoLevel;
 use crate::kernel::{Candidates, Corners, Entry, Reading};
 use crate::mask::{Mask, MaskRow};
-use crate::rasterize::{Blockers, Rasterizer, edge_planes, is_near_chord};
+use crate::rasterize::{Blockers, Rasterizer, edge_planes, replaced};
 
 /// Per receiver, the candidate triangles that showed in some known frame,
 /// by their slots in the frame's [`Corners`] (both levels in one layout).
 #[derive(Clone, Debug)]
 pub(crate) struct VisibleSets {
-    sets: Csr,
-}
-
-/// Per receiver lists, compressed: receiver v's entries are
-/// `entries[offsets[v]..offsets[v + 1]]`, sorted by slot.
-#[derive(Clone, Debug)]
-struct Csr {
-    offsets: Vec<u32>,
-    entries: Vec<Entry>,
-}
-
-impl Csr {
-    fn of(&self, v: usize) -> &[Entry] {
-        &self.entries[self.offsets[v] as usize..self.offsets[v + 1] as usize]
-    }
+    /// Per receiver, its set, sorted by slot.
+    sets: Csr<Entry>,
 }
 
 /// A candidate that survived culling in one frame.
@@ -91,22 +79,25 @@ impl VisibleSets {
                     grow(raster, &blockers, v, &candidates, &corners, set, shown);
                 });
         }
-        let mut out = Csr {
-            offsets: vec![0],
-            entries: Vec::new(),
-        };
-        for set in sets {
-            out.entries.extend(set);
-            out.offsets.push(out.entries.len() as u32);
-        }
-        Ok(VisibleSets { sets: out })
+        Ok(VisibleSets {
+            sets: Csr::from_lists(sets),
+        })
     }
 
     /// What receiver `v` rasterizes in a frame laid out as `corners` (with
     /// the hierarchy's coarse level, when there is one, as the sets were
     /// built).
-    pub(crate) fn candidates<'a>(&'a self, corners: &'a Corners, v: usize) -> Candidates<'a> {
-        Candidates::Listed(corners, self.sets.of(v))
+    pub(crate) fn candidates<'a>(
+        &'a self,
+        corners: &'a Corners,
+        hierarchy: Option<&'a TwoLevel>,
+        v: usize,
+    ) -> Candidates<'a> {
+        Candidates::Listed {
+            corners,
+            entries: self.sets.of(v),
+            regions: hierarchy.map(TwoLevel::regions),
+        }
     }
 }
 
@@ -124,14 +115,23 @@ fn grow<W: MaskRow>(
     let frame = blockers.frame(v);
     shown.clear();
     let mut covered = Mask::EMPTY;
+    let local = |entry: Entry| corners.triangle(entry.slot()).map(|p| frame.to_local(p));
     for entry in candidates.entries() {
-        let local = corners.triangle(entry.slot()).map(|p| frame.to_local(p));
-        let planes = edge_planes(local, entry.cull());
-        if !planes.kept || entry.chords() && is_near_chord(local, planes.behind) {
+        let triangle = local(entry);
+        let planes = edge_planes(triangle, entry.cull());
+        // A near chord replaced in this frame shows as the fine triangles of
+        // its region, as one candidate: listed, it is replaced the same way.
+        let mut mask = Mask::EMPTY;
+        if entry.chords() && replaced(triangle, planes.above, planes.behind) {
+            for &fine in candidates.replacements(entry) {
+                raster.draw(local(fine), fine.cull(), &mut mask);
+            }
+        } else if planes.kept {
+            raster.draw(triangle, entry.cull(), &mut mask);
+        }
+        if mask.is_empty() {
             continue;
         }
-        let mut mask = Mask::EMPTY;
-        raster.draw(local, entry.cull(), &mut mask);
         let known = set.binary_search(&entry).is_ok();
         if known {
             covered = covered.or(&mask);

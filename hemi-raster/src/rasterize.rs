@@ -66,6 +66,8 @@ pub(crate) struct EdgePlanes {
     /// Survives culling (module docs: below the horizon, through the
     /// receiver, back-facing while culling back faces).
     pub(crate) kept: bool,
+    /// Some corner is above the horizon (z > 0).
+    pub(crate) above: bool,
     /// The receiver is behind the triangle's plane (det > 0).
     pub(crate) behind: bool,
     pub(crate) normals: [Vec3; 3],
@@ -87,6 +89,7 @@ pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> EdgePl
     let s = if det < 0.0 { -1.0 } else { 1.0 };
     EdgePlanes {
         kept: above & spans_a_cone & !(cull_back_faces & behind),
+        above,
         behind,
         normals: [s * ab, s * bc, s * ca],
     }
@@ -104,12 +107,11 @@ pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> EdgePl
 ///   ([`in_envelope`](crate::hierarchy::in_envelope) with
 ///   [`ENVELOPE`](crate::hierarchy::ENVELOPE)): close to its plane compared
 ///   with its size, where its direction errs by as much as the triangle
-///   spans. The hierarchy lists the fine triangles such a coarse triangle
-///   stands for among the receiver's near triangles, so dropping it leaves
-///   no hole.
+///   spans.
 ///
 /// Tested per frame, so it follows deformation; branch-free, so that the
-/// per-receiver loop evaluates it 16 triangles at a time.
+/// per-receiver loop evaluates it 16 triangles at a time. See [`replaced`]
+/// for what takes its place.
 #[inline(always)]
 pub(crate) fn is_near_chord(triangle: [Vec3; 3], behind: bool) -> bool {
     use crate::hierarchy::{ENVELOPE, in_envelope};
@@ -121,6 +123,20 @@ pub(crate) fn is_near_chord(triangle: [Vec3; 3], behind: bool) -> bool {
         .max((c - centroid).length_squared());
     let chord = behind & (centroid.length_squared() < 4.0 * radius2);
     chord | in_envelope(triangle, ENVELOPE)
+}
+
+/// Whether coarse triangle `triangle` of the receiver's body (tangent
+/// coordinates; `above` and `behind` as its [`edge_planes`] found) is
+/// dropped in this frame and
+/// replaced by the fine triangles it stands for (its region, see the
+/// `hierarchy` module docs): it is a near chord ([`is_near_chord`]) that
+/// shows above the horizon. Below it, the triangle is culled as any other
+/// (and with it the region, whose fine triangles stray from it by a fraction
+/// of its size): so the per-receiver loop, which skips whole clusters below
+/// the horizon unseen, replaces exactly the same triangles.
+#[inline(always)]
+pub(crate) fn replaced(triangle: [Vec3; 3], above: bool, behind: bool) -> bool {
+    above & is_near_chord(triangle, behind)
 }
 
 /// A receiver's tangent frame: origin at the vertex, z along its normal.
