@@ -26,6 +26,7 @@ use shadow_core::{
 };
 
 use crate::{
+    chart::{Axes, Point, speed_vs_error},
     io::{write_atomic, write_json_atomic},
     reference::{
         VertexReference,
@@ -34,6 +35,15 @@ use crate::{
     report::{MachineInfo, ReferenceInfo},
     run::median,
     score::{ErrorStats, against},
+};
+
+/// The chart's file name beside the table.
+pub const CHART: &str = "accuracy.png";
+
+const AXES: Axes = Axes {
+    title: "hemi-raster options: time per frame against transfer error",
+    error: "transfer error per vertex, Table 1's measure (%)",
+    time: "update + shade per frame (ms)",
 };
 
 /// The scenes of the paper's Table 1 that have a built-in counterpart:
@@ -744,10 +754,30 @@ pub struct AccuracyReport {
 }
 
 impl AccuracyReport {
-    /// Writes `accuracy.json` and `accuracy.md` into `dir`, each atomically.
+    /// Writes `accuracy.json`, `accuracy.md` and the chart of time against
+    /// transfer error [`CHART`] into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
         write_json_atomic(&dir.join("accuracy.json"), self)?;
+        speed_vs_error(&self.points(), AXES, &dir.join(CHART))?;
         write_atomic(&dir.join("accuracy.md"), self.markdown().as_bytes())
+    }
+
+    /// Every configuration with a transfer vector and a time, per scene.
+    fn points(&self) -> Vec<Point> {
+        let mut points = Vec::new();
+        for scene in &self.scenes {
+            for row in &scene.rows {
+                if let (Some(transfer), Some(frame_ms)) = (row.transfer, row.frame_ms) {
+                    points.push(Point {
+                        series: row.name.clone(),
+                        label: scene.scene.clone(),
+                        error_percent: transfer.per_vertex as f64 * 100.0,
+                        frame_ms,
+                    });
+                }
+            }
+        }
+        points
     }
 
     pub fn markdown(&self) -> String {
@@ -774,7 +804,7 @@ impl AccuracyReport {
              shade. *unshadowed* ignores visibility (the upper bound); *reference transfer* \
              shades the ray-traced transfer with the environment's order-5 SH: its radiance \
              error is what SH truncation alone costs under that environment, the floor of every \
-             SH row.\n"
+             SH row. `{CHART}` plots each configuration's time against its transfer error.\n"
         );
         for scene in &self.scenes {
             scene.markdown(&mut s);

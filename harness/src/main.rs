@@ -71,7 +71,7 @@ enum Command {
     },
     /// Score hemi-raster's options (hierarchy, plane table, mask, integration)
     /// by Kautz et al.'s transfer error and by radiance error; write
-    /// accuracy.md and accuracy.json.
+    /// accuracy.md, accuracy.json and accuracy.png (time against error).
     Accuracy {
         /// Only these built-in scenes (comma separated); default those of
         /// human, cloth and chess that are built in.
@@ -80,7 +80,7 @@ enum Command {
         /// One environment for every scene instead of each scene's own.
         #[arg(long)]
         env: Option<String>,
-        /// Where to write accuracy.md and accuracy.json.
+        /// Where to write accuracy.md, accuracy.json and accuracy.png.
         #[arg(long, default_value = "reports")]
         out: PathBuf,
         #[command(flatten)]
@@ -403,7 +403,11 @@ fn main() -> Result<()> {
             }
             report.write(&out)?;
             print!("{}", report.markdown());
-            println!("wrote accuracy.md and accuracy.json in {}", out.display());
+            println!(
+                "wrote accuracy.md, accuracy.json and {} in {}",
+                accuracy::CHART,
+                out.display()
+            );
         }
     }
     Ok(())

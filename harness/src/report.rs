@@ -7,6 +7,7 @@ use serde::Serialize;
 use shadow_core::Result;
 
 use crate::{
+    chart::{Axes, Point, speed_vs_error},
     io::{write_atomic, write_json_atomic},
     run::RunResult,
 };
@@ -77,7 +78,15 @@ impl Report {
     /// `speed-vs-error.png` into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
         write_json_atomic(&dir.join("report.json"), self)?;
-        crate::chart::speed_vs_error(&self.runs, &dir.join(CHART))?;
+        let points: Vec<Point> = (self.runs.iter())
+            .map(|r| Point {
+                series: r.method.clone(),
+                label: r.scene.clone(),
+                error_percent: r.mean_error() as f64 * 100.0,
+                frame_ms: r.frame_seconds() * 1e3,
+            })
+            .collect();
+        speed_vs_error(&points, Axes::RADIANCE, &dir.join(CHART))?;
         write_atomic(&dir.join("report.md"), self.markdown().as_bytes())
     }
 
