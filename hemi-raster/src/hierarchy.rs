@@ -360,12 +360,6 @@ impl TwoLevel {
         })
     }
 
-    /// Per slot of the coarse level, the fine triangles that replace the
-    /// coarse triangle there when it is too close to a receiver.
-    pub(crate) fn regions(&self) -> &Csr<Entry> {
-        &self.regions
-    }
-
     /// Number of coarse triangles of `object`.
     pub(crate) fn coarse_triangle_count(&self, object: usize) -> Option<usize> {
         self.coarse_objects.get(object).map(|r| r.len())

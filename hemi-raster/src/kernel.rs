@@ -387,12 +387,12 @@ pub(crate) enum Candidates<'a> {
         regions: &'a Csr<Entry>,
     },
     /// A potentially visible set (§3.2, [`crate::pvs`]): listed triangles
-    /// of either level; with two levels, the `regions` that replace the
-    /// near chords listed.
+    /// of either level; with two levels, what replaces each listed near
+    /// chord, `kept.0`'s rows from `kept.1` on, one per listed entry.
     Listed {
         corners: &'a Corners,
         entries: &'a [Entry],
-        regions: Option<&'a Csr<Entry>>,
+        kept: Option<(&'a Csr<Entry>, usize)>,
     },
 }
 
@@ -444,23 +444,36 @@ impl Candidates<'_> {
     /// finds it [`replaced`]: its region for a coarse triangle of the
     /// receiver's own body, nothing otherwise.
     pub(crate) fn replacements(&self, entry: Entry) -> &[Entry] {
-        match (self.regions(), entry.chords()) {
-            (Some((corners, regions)), true) => regions.of(entry.slot() - corners.coarse_base()),
+        match *self {
+            Candidates::TwoLevel {
+                corners, regions, ..
+            } if entry.chords() => regions.of(entry.slot() - corners.coarse_base()),
             _ => &[],
         }
     }
 
-    /// The layout and regions of the replacements, with two levels.
+    /// What replaces the near chord the loop reported as `key`: in the
+    /// chunks of two levels its slot from the coarse level's first, listed
+    /// its position in the list (see [`listed`]).
     #[inline(always)]
-    fn regions(&self) -> Option<(&Corners, &Csr<Entry>)> {
+    fn replaced_by(&self, key: u32) -> &[Entry] {
         match *self {
-            Candidates::All(_) => None,
-            Candidates::TwoLevel {
-                corners, regions, ..
-            } => Some((corners, regions)),
+            Candidates::TwoLevel { regions, .. } => regions.of(key as usize),
             Candidates::Listed {
-                corners, regions, ..
-            } => regions.map(|r| (corners, r)),
+                kept: Some((rows, first)),
+                ..
+            } => rows.of(first + key as usize),
+            _ => &[],
+        }
+    }
+
+    /// The frame's layout the candidates are read from.
+    #[inline(always)]
+    fn corners(&self) -> &Corners {
+        match *self {
+            Candidates::All(corners)
+            | Candidates::TwoLevel { corners, .. }
+            | Candidates::Listed { corners, .. } => corners,
         }
     }
 }
@@ -685,21 +698,19 @@ impl<W: MaskRow> Job<'_, W> {
                 );
             }
         }
-        // The fine triangles that stand for the coarse ones replaced (none
-        // of them a coarse triangle, so none replaced in turn).
-        if let Some((corners, regions)) = self.candidates.regions()
-            && !replaced.is_empty()
-        {
+        // The fine triangles that stand for the near chords replaced.
+        if !replaced.is_empty() {
             listed_entries.clear();
-            for &c in replaced.iter() {
-                listed_entries.extend_from_slice(regions.of(c as usize));
+            for &key in replaced.iter() {
+                listed_entries.extend_from_slice(self.candidates.replaced_by(key));
             }
             fit(
                 survivors,
                 count / 3 + listed_entries.len().next_multiple_of(LANES),
             );
+            // Fine triangles all: none is replaced in turn.
             listed::<W>(
-                corners,
+                self.candidates.corners(),
                 listed_entries,
                 &frame,
                 resolution,
@@ -800,9 +811,9 @@ fn fit(survivors: &mut Vec<u32>, slots: usize) {
 }
 
 /// Phase 1 on listed triangles, 16 at a time, read by slot from `corners`.
+/// The near chords [`replaced`] are appended to `replaced` by their
+/// position in `entries` (only visible sets list near chords).
 #[inline(always)]
-/// The near chords [`replaced`] are appended to `replaced`, by slot from the
-/// coarse level's first.
 fn listed<W: MaskRow>(
     corners: &Corners,
     entries: &[Entry],
@@ -814,15 +825,16 @@ fn listed<W: MaskRow>(
 ) {
     let mut columns = [[0.0f32; LANES]; 9];
     let mut flags = LaneFlags::splat(false, false);
+    let mut done = 0;
     for entries in entries.chunks(LANES) {
         corners.gather(entries, &mut columns, &mut flags);
         let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
         let mut bits = setup::<W>(c, &flags, frame, resolution, survivors, count);
         while bits != 0 {
-            let slot = entries[bits.trailing_zeros() as usize].slot();
-            replaced.push((slot - corners.coarse_base()) as u32);
+            replaced.push((done + bits.trailing_zeros() as usize) as u32);
             bits &= bits - 1;
         }
+        done += LANES;
     }
 }
 
@@ -1084,9 +1096,11 @@ mod tests {
                 excluded: &excluded,
                 regions: &region_entries,
             };
-            // The same candidates listed by slot, from either reading: the
-            // listed near chords are replaced as the frame finds them.
+            // The same candidates listed by slot, from either reading, each
+            // near chord with its whole region kept: the listed near chords
+            // are replaced as the frame finds them.
             let entries = two_level.entries();
+            let kept = Csr::from_lists(entries.iter().map(|&e| two_level.replacements(e)));
             for simd in Simd::available() {
                 let got = receiver_mask(
                     simd,
@@ -1102,7 +1116,7 @@ mod tests {
                     let candidates = Candidates::Listed {
                         corners,
                         entries: &entries,
-                        regions: Some(&region_entries),
+                        kept: Some((&kept, 0)),
                     };
                     let got = receiver_mask(simd, raster.lut(), &frame, &candidates, &mut scratch);
                     assert_eq!(got, two_truth, "{simd:?} listed, receiver {v}");

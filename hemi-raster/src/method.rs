@@ -184,7 +184,7 @@ impl<W: MaskRow> Pipeline<W> {
         let corners = Corners::new(blockers, coarse.as_ref(), reading);
         let (lut, simd) = (self.raster.lut(), self.simd);
         let candidates = |v: usize| match (visible, hierarchy) {
-            (Some(sets), h) => sets.candidates(&corners, h, v),
+            (Some(sets), _) => sets.candidates(&corners, v),
             (None, Some(h)) => h.candidates(&corners, v),
             (None, None) => Candidates::All(&corners),
         };
