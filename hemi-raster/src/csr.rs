@@ -39,12 +39,6 @@ impl<T: Copy> Csr<T> {
 }
 
 impl<T> Csr<T> {
-    /// Where list `i` starts among all items: the rows of a `Csr` with one
-    /// row per item of this one start there for list `i`'s items.
-    pub(crate) fn start(&self, i: usize) -> usize {
-        self.offsets[i] as usize
-    }
-
     /// List `i`.
     #[inline(always)]
     pub(crate) fn of(&self, i: usize) -> &[T] {

@@ -387,12 +387,13 @@ pub(crate) enum Candidates<'a> {
         regions: &'a Csr<Entry>,
     },
     /// A potentially visible set (§3.2, [`crate::pvs`]): listed triangles
-    /// of either level; with two levels, what replaces each listed near
-    /// chord, `kept.0`'s rows from `kept.1` on, one per listed entry.
+    /// of either level; with two levels, what replaces the listed near
+    /// chords: rows `kept.1` of `kept.0`, one for each of the first entries
+    /// (the others replace nothing).
     Listed {
         corners: &'a Corners,
         entries: &'a [Entry],
-        kept: Option<(&'a Csr<Entry>, usize)>,
+        kept: Option<(&'a Csr<Entry>, Range<usize>)>,
     },
 }
 
@@ -452,17 +453,15 @@ impl Candidates<'_> {
         }
     }
 
-    /// What replaces the near chord the loop reported as `key`: in the
-    /// chunks of two levels its slot from the coarse level's first, listed
-    /// its position in the list (see [`listed`]).
+    /// What replaces the near chord listed at `position`, when the frame
+    /// replaces it (only visible sets list near chords).
     #[inline(always)]
-    fn replaced_by(&self, key: u32) -> &[Entry] {
-        match *self {
-            Candidates::TwoLevel { regions, .. } => regions.of(key as usize),
+    fn kept(&self, position: usize) -> &[Entry] {
+        match self {
             Candidates::Listed {
-                kept: Some((rows, first)),
+                kept: Some((rows, range)),
                 ..
-            } => rows.of(first + key as usize),
+            } if position < range.len() => rows.of(range.start + position),
             _ => &[],
         }
     }
@@ -484,12 +483,9 @@ impl Candidates<'_> {
 pub(crate) struct Scratch {
     /// Three plane-cell codes per surviving triangle.
     survivors: Vec<u32>,
-    /// The coarse triangles replaced in this frame, by slot from the coarse
-    /// level's first.
-    replaced: Vec<u32>,
-    /// The listed triangles of a two-level receiver: near ones, then the
-    /// replacements.
-    listed: Vec<Entry>,
+    /// The listed triangles: near ones or a visible set, and the fine
+    /// triangles that replace near chords.
+    queue: Vec<Entry>,
     /// Time and counts of the two phases, when profiling.
     profile: Option<LoopProfile>,
 }
@@ -623,25 +619,22 @@ impl<W: MaskRow> Job<'_, W> {
         let start = scratch.profile.is_some().then(Instant::now);
         let Scratch {
             survivors,
-            replaced,
-            listed: listed_entries,
+            queue,
             profile,
         } = scratch;
         let slots = match *self.candidates {
             Candidates::All(corners) => Corners::slots(corners.fine()),
-            Candidates::TwoLevel { corners, near, .. } => {
-                Corners::slots(corners.coarse()) + near.len().next_multiple_of(LANES)
-            }
-            Candidates::Listed { entries, .. } => entries.len().next_multiple_of(LANES),
+            Candidates::TwoLevel { corners, .. } => Corners::slots(corners.coarse()),
+            Candidates::Listed { .. } => 0,
         };
-        // The replacements are not known yet: `fit` again for them below.
+        // Listed triangles make room for themselves as they come.
         fit(survivors, slots);
-        replaced.clear();
         // Plain loops and direct calls only: a closure or an iterator
         // adaptor here would be compiled apart from the `target_feature`
         // function, for the baseline instruction set.
         let mut count = 0;
-        match *self.candidates {
+        queue.clear();
+        let listed = match *self.candidates {
             Candidates::All(corners) => {
                 for g in corners.fine() {
                     for chunk in g.chunks.clone() {
@@ -652,13 +645,14 @@ impl<W: MaskRow> Job<'_, W> {
                         }
                     }
                 }
+                0
             }
             Candidates::TwoLevel {
                 corners,
                 own,
                 near,
                 excluded,
-                ..
+                regions,
             } => {
                 let first = corners.coarse_base() / LANES;
                 let mut next = 0;
@@ -678,49 +672,26 @@ impl<W: MaskRow> Job<'_, W> {
                             let mut bits =
                                 setup::<W>(c, &flags, &frame, resolution, survivors, &mut count);
                             while bits != 0 {
-                                replaced.push((base + bits.trailing_zeros() as usize) as u32);
+                                let slot = base + bits.trailing_zeros() as usize;
+                                queue.extend_from_slice(regions.of(slot));
                                 bits &= bits - 1;
                             }
                         }
                     }
                 }
-                // Near triangles are read by slot; their boxes would not
-                // cull them.
-                listed::<W>(
-                    corners, near, &frame, resolution, survivors, &mut count, replaced,
-                );
+                // Near triangles and replacements are read by slot; their
+                // boxes would not cull them.
+                queue.extend_from_slice(near);
+                near.len()
             }
-            Candidates::Listed {
-                corners, entries, ..
-            } => {
-                listed::<W>(
-                    corners, entries, &frame, resolution, survivors, &mut count, replaced,
-                );
+            Candidates::Listed { entries, .. } => {
+                queue.extend_from_slice(entries);
+                entries.len()
             }
-        }
-        // The fine triangles that stand for the near chords replaced.
-        if !replaced.is_empty() {
-            listed_entries.clear();
-            for &key in replaced.iter() {
-                listed_entries.extend_from_slice(self.candidates.replaced_by(key));
-            }
-            fit(
-                survivors,
-                count / 3 + listed_entries.len().next_multiple_of(LANES),
-            );
-            // Fine triangles all: none is replaced in turn.
-            listed::<W>(
-                self.candidates.corners(),
-                listed_entries,
-                &frame,
-                resolution,
-                survivors,
-                &mut count,
-                replaced,
-            );
-            if let Some(p) = profile.as_mut() {
-                p.replacements += listed_entries.len() as u64;
-            }
+        };
+        self.listed(queue, &frame, resolution, survivors, &mut count);
+        if let Some(p) = profile.as_mut() {
+            p.replacements += (queue.len() - listed) as u64;
         }
         let setup_end = start.map(|_| Instant::now());
         let mut mask = Mask::EMPTY;
@@ -731,6 +702,38 @@ impl<W: MaskRow> Job<'_, W> {
             p.survivors += (count / 3) as u64;
         }
         mask
+    }
+
+    /// Phase 1 on the listed triangles in `queue`, 16 at a time, read by
+    /// slot. A near chord the frame replaces (only visible sets list near
+    /// chords; the hierarchy queues its replacements before) queues what
+    /// replaces it, so that only the queue's last chunk is partly empty.
+    #[inline(always)]
+    fn listed(
+        &self,
+        queue: &mut Vec<Entry>,
+        frame: &Frame,
+        resolution: u32,
+        survivors: &mut Vec<u32>,
+        count: &mut usize,
+    ) {
+        let corners = self.candidates.corners();
+        let mut columns = [[0.0f32; LANES]; 9];
+        let mut flags = LaneFlags::splat(false, false);
+        let mut next = 0;
+        while next < queue.len() {
+            let end = queue.len().min(next + LANES);
+            corners.gather(&queue[next..end], &mut columns, &mut flags);
+            fit(survivors, *count / 3 + LANES);
+            let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
+            let mut bits = setup::<W>(c, &flags, frame, resolution, survivors, count);
+            while bits != 0 {
+                let position = next + bits.trailing_zeros() as usize;
+                queue.extend_from_slice(self.candidates.kept(position));
+                bits &= bits - 1;
+            }
+            next = end;
+        }
     }
 
     /// Phase 2: per surviving triangle, AND its three plane masks and OR
@@ -807,34 +810,6 @@ fn fit(survivors: &mut Vec<u32>, slots: usize) {
     let need = 3 * slots;
     if survivors.len() < need {
         survivors.resize(need, 0);
-    }
-}
-
-/// Phase 1 on listed triangles, 16 at a time, read by slot from `corners`.
-/// The near chords [`replaced`] are appended to `replaced` by their
-/// position in `entries` (only visible sets list near chords).
-#[inline(always)]
-fn listed<W: MaskRow>(
-    corners: &Corners,
-    entries: &[Entry],
-    frame: &Frame,
-    resolution: u32,
-    survivors: &mut [u32],
-    count: &mut usize,
-    replaced: &mut Vec<u32>,
-) {
-    let mut columns = [[0.0f32; LANES]; 9];
-    let mut flags = LaneFlags::splat(false, false);
-    let mut done = 0;
-    for entries in entries.chunks(LANES) {
-        corners.gather(entries, &mut columns, &mut flags);
-        let c = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| &columns[k]);
-        let mut bits = setup::<W>(c, &flags, frame, resolution, survivors, count);
-        while bits != 0 {
-            replaced.push((done + bits.trailing_zeros() as usize) as u32);
-            bits &= bits - 1;
-        }
-        done += LANES;
     }
 }
 
@@ -1101,6 +1076,7 @@ mod tests {
             // are replaced as the frame finds them.
             let entries = two_level.entries();
             let kept = Csr::from_lists(entries.iter().map(|&e| two_level.replacements(e)));
+            let rows = 0..entries.len();
             for simd in Simd::available() {
                 let got = receiver_mask(
                     simd,
@@ -1116,7 +1092,7 @@ mod tests {
                     let candidates = Candidates::Listed {
                         corners,
                         entries: &entries,
-                        kept: Some((&kept, 0)),
+                        kept: Some((&kept, rows.clone())),
                     };
                     let got = receiver_mask(simd, raster.lut(), &frame, &candidates, &mut scratch);
                     assert_eq!(got, two_truth, "{simd:?} listed, receiver {v}");

@@ -61,11 +61,13 @@ use crate::rasterize::{Blockers, Rasterizer, edge_planes, replaced};
 pub(crate) struct VisibleSets {
     /// Per receiver, its set, sorted by slot.
     sets: Csr<Entry>,
-    /// Per entry of `sets`, all receivers' one after another: for a near
-    /// chord of the receiver's body, the fine triangles of its region that
-    /// showed in the known frames that replaced it (module docs); empty for
-    /// the others.
+    /// For the near chords of the receivers' bodies that come first in
+    /// their sets, the fine triangles of their regions that showed in the
+    /// known frames that replaced them (module docs); receiver v's are rows
+    /// `kept_from[v]..kept_from[v + 1]`, one per chord at the head of its
+    /// set. The others (most) replace nothing.
     kept: Csr<Entry>,
+    kept_from: Vec<u32>,
 }
 
 /// A member of a set being built: a candidate and, for a near chord, the
@@ -111,10 +113,24 @@ impl VisibleSets {
                     grow(raster, &blockers, v, &candidates, &corners, set, shown);
                 });
         }
+        // The members that keep fine triangles first, so that only they
+        // need a row of `kept`.
+        for set in &mut sets {
+            set.sort_by_key(|m| m.kept.is_empty());
+        }
+        fn keeping(set: &[Member]) -> impl Iterator<Item = &Member> {
+            set.iter().take_while(|m| !m.kept.is_empty())
+        }
+        let mut kept_from = vec![0u32];
+        for set in &sets {
+            let rows = kept_from[kept_from.len() - 1] as usize + keeping(set).count();
+            kept_from.push(u32::try_from(rows).expect("fewer than 2³² kept rows"));
+        }
         let entries = |set: &Vec<Member>| set.iter().map(|m| m.entry).collect::<Vec<_>>();
         Ok(VisibleSets {
             sets: Csr::from_lists(sets.iter().map(entries)),
-            kept: Csr::from_lists(sets.iter().flatten().map(|m| &m.kept)),
+            kept: Csr::from_lists(sets.iter().flat_map(|set| keeping(set)).map(|m| &m.kept)),
+            kept_from,
         })
     }
 
@@ -125,7 +141,10 @@ impl VisibleSets {
         Candidates::Listed {
             corners,
             entries: self.sets.of(v),
-            kept: Some((&self.kept, self.sets.start(v))),
+            kept: Some((
+                &self.kept,
+                self.kept_from[v] as usize..self.kept_from[v + 1] as usize,
+            )),
         }
     }
 }
