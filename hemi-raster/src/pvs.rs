@@ -164,7 +164,6 @@ fn grow<W: MaskRow>(
     shown.clear();
     let mut covered = Mask::EMPTY;
     let local = |entry: Entry| corners.triangle(entry.slot()).map(|p| frame.to_local(p));
-
     for entry in candidates.entries() {
         let triangle = local(entry);
         let planes = edge_planes(triangle, entry.cull());
@@ -196,6 +195,9 @@ fn grow<W: MaskRow>(
             });
         }
     }
+    // Plain candidates first: on a tie the cover takes a triangle that is a
+    // candidate in every frame over the same one kept under a chord.
+    shown.sort_by_key(|s| s.fine.is_some());
     for s in shown.iter().filter(|s| s.known) {
         covered = covered.or(&s.mask);
     }
