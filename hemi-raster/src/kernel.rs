@@ -320,7 +320,7 @@ impl Corners {
 
 /// A triangle of a per-receiver list: its slot in a frame's [`Corners`],
 /// and how it is culled (back faces; near chords of the receiver's own
-/// body, [`is_near_chord`]), packed in one word.
+/// body, which [`replaced`] swaps for fine triangles), packed in one word.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub(crate) struct Entry(u32);
 
