@@ -281,15 +281,13 @@ impl TwoLevel {
             }
             slots += range.len().next_multiple_of(LANES);
         }
+        // Each fine triangle in the region of its owner (padding slots stay
+        // empty; objects used whole own nothing).
         let mut regions = vec![Vec::new(); slots];
         for (q, part) in parts.iter().enumerate() {
-            if part.coarse.is_none() {
-                continue;
-            }
-            for (c, t) in coarse_objects[q].clone().enumerate() {
-                regions[coarse_slot[t] as usize] = (part.region(c).iter())
-                    .map(|&f| Entry::new(f + slot_bases[q], cull[q], false))
-                    .collect();
+            for (f, &c) in part.owners.iter().enumerate() {
+                let slot = coarse_slot[coarse_objects[q].start + c as usize] as usize;
+                regions[slot].push(Entry::new(f as u32 + slot_bases[q], cull[q], false));
             }
         }
         let mut near = Csr::default();
@@ -439,10 +437,9 @@ struct Part<'a> {
     fine: Sorted,
     spatial: f32,
     /// Per fine triangle: the coarse triangle closest to its centroid, which
-    /// stands for it.
+    /// stands for it (its *region* is the fine triangles it owns); empty
+    /// when the object is used whole.
     owners: Vec<u32>,
-    /// Per coarse triangle: the fine triangles it stands for (its region).
-    regions: Csr<u32>,
 }
 
 impl<'a> Part<'a> {
@@ -462,7 +459,6 @@ impl<'a> Part<'a> {
             fine: Sorted::default(),
             spatial: 0.0,
             owners: Vec::new(),
-            regions: Csr::default(),
         };
         let target = (triangles.len() / divisor as usize).max(min_triangles as usize);
         if target >= triangles.len() {
@@ -525,17 +521,12 @@ impl<'a> Part<'a> {
                 coarse_sorted.nearest(centre, mean_radius)
             })
             .collect();
-        let mut regions = vec![Vec::new(); coarse.len()];
-        for (t, &c) in owners.iter().enumerate() {
-            regions[c as usize].push(t as u32);
-        }
         Ok(Part {
             coarse: Some(coarse),
             adjacency: Some((weld, adjacency)),
             fine,
             spatial: f32::from(reach) * mean_radius,
             owners,
-            regions: Csr::from_lists(regions),
             ..whole
         })
     }
@@ -569,11 +560,6 @@ impl<'a> Part<'a> {
         } else {
             Vec::new()
         }
-    }
-
-    /// The fine triangles coarse triangle `c` stands for.
-    fn region(&self, c: usize) -> &[u32] {
-        self.regions.of(c)
     }
 
     /// Whether a vertex of this object lies within `other`'s spatial reach

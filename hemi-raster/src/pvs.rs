@@ -62,7 +62,8 @@ use crate::rasterize::{Blockers, Rasterizer, edge_planes, replaced};
 /// by their slots in the frame's [`Corners`] (both levels in one layout).
 #[derive(Clone, Debug)]
 pub(crate) struct VisibleSets {
-    /// Per receiver, its set, sorted by slot.
+    /// Per receiver, its set: the near chords that keep fine triangles
+    /// first, then the others, each part sorted by slot.
     sets: Csr<Entry>,
     /// For the near chords of the receivers' bodies that come first in
     /// their sets, the fine triangles of their regions that showed in the

@@ -127,10 +127,9 @@ pub(crate) fn is_near_chord(triangle: [Vec3; 3], behind: bool) -> bool {
 
 /// Whether coarse triangle `triangle` of the receiver's body (tangent
 /// coordinates; `above` and `behind` as its [`edge_planes`] found) is
-/// dropped in this frame and
-/// replaced by the fine triangles it stands for (its region, see the
-/// `hierarchy` module docs): it is a near chord ([`is_near_chord`]) that
-/// shows above the horizon. Below it, the triangle is culled as any other
+/// dropped in this frame and replaced by the fine triangles it stands for
+/// (its region, see the `hierarchy` module docs): it is a near chord
+/// ([`is_near_chord`]) that shows above the horizon. Below it, the triangle is culled as any other
 /// (and with it the region, whose fine triangles stray from it by a fraction
 /// of its size): so the per-receiver loop, which skips whole clusters below
 /// the horizon unseen, replaces exactly the same triangles.
