@@ -17,6 +17,7 @@
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::gltf::GltfAsset;
+use harness::report::MachineInfo;
 use harness::scenes;
 use hemi_raster::{Config, HemiRaster, Hierarchy, Pvs, Simd};
 use shadow_core::{Scene, ShadowMethod};
@@ -60,29 +61,11 @@ fn configs() -> Vec<(String, Config)> {
     out
 }
 
-/// The CPU the numbers come from (Linux: /proc/cpuinfo's model name,
-/// family and model), so that a printout says which machine it is from.
-fn cpu() -> String {
-    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let field = |name: &str| {
-        info.lines()
-            .find(|l| l.split(':').next().is_some_and(|k| k.trim() == name))
-            .and_then(|l| l.split_once(':'))
-            .map(|(_, v)| v.trim().to_owned())
-    };
-    match (field("model name"), field("cpu family"), field("model")) {
-        (Some(name), Some(family), Some(model)) => {
-            format!("{name} (family {family}, model {model})")
-        }
-        _ => std::env::consts::ARCH.to_owned(),
-    }
-}
-
 /// Table 2, printed: one profiled update per scene and hierarchy.
 fn print_split() {
     println!(
         "\nhemi-raster on {}, SIMD paths {:?}",
-        cpu(),
+        MachineInfo::cpu_generation(),
         Simd::available()
     );
     println!(

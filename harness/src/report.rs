@@ -27,17 +27,8 @@ pub struct MachineInfo {
 
 impl MachineInfo {
     pub fn detect(adapter: Option<String>) -> MachineInfo {
-        let cpu = std::fs::read_to_string("/proc/cpuinfo")
-            .ok()
-            .and_then(|s| {
-                s.lines()
-                    .find(|l| l.starts_with("model name"))
-                    .and_then(|l| l.split(':').nth(1))
-                    .map(|s| s.trim().to_string())
-            })
-            .unwrap_or_else(|| std::env::consts::ARCH.to_string());
         MachineInfo {
-            cpu,
+            cpu: cpuinfo_field("model name").unwrap_or_else(|| std::env::consts::ARCH.to_owned()),
             threads: rayon::current_num_threads(),
             adapter,
             profile: if cfg!(debug_assertions) {
@@ -47,6 +38,27 @@ impl MachineInfo {
             },
         }
     }
+
+    /// The CPU's model name with its family and model numbers, which tell
+    /// generations apart where the name does not (a virtual machine's "AMD
+    /// EPYC" may be a Zen 3 or a Zen 4, whose timings differ twofold): for
+    /// benchmark printouts. Without them, as [`MachineInfo::detect`] names it.
+    pub fn cpu_generation() -> String {
+        let name = MachineInfo::detect(None).cpu;
+        match (cpuinfo_field("cpu family"), cpuinfo_field("model")) {
+            (Some(family), Some(model)) => format!("{name} (family {family}, model {model})"),
+            _ => name,
+        }
+    }
+}
+
+/// The first value of `name` in /proc/cpuinfo (Linux only).
+fn cpuinfo_field(name: &str) -> Option<String> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    info.lines()
+        .filter_map(|l| l.split_once(':'))
+        .find(|(key, _)| key.trim() == name)
+        .map(|(_, value)| value.trim().to_owned())
 }
 
 /// A scene's reference: how it was made and how noisy it is.
