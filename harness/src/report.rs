@@ -28,7 +28,7 @@ pub struct MachineInfo {
 impl MachineInfo {
     pub fn detect(adapter: Option<String>) -> MachineInfo {
         MachineInfo {
-            cpu: cpuinfo_field("model name").unwrap_or_else(|| std::env::consts::ARCH.to_owned()),
+            cpu: cpu_name(cpuinfo().as_deref()),
             threads: rayon::current_num_threads(),
             adapter,
             profile: if cfg!(debug_assertions) {
@@ -44,21 +44,35 @@ impl MachineInfo {
     /// EPYC" may be a Zen 3 or a Zen 4, whose timings differ twofold): for
     /// benchmark printouts. Without them, as [`MachineInfo::detect`] names it.
     pub fn cpu_generation() -> String {
-        let name = MachineInfo::detect(None).cpu;
-        match (cpuinfo_field("cpu family"), cpuinfo_field("model")) {
+        let info = cpuinfo();
+        let info = info.as_deref();
+        let name = cpu_name(info);
+        let field = |key| info.and_then(|i| cpuinfo_field(i, key));
+        match (field("cpu family"), field("model")) {
             (Some(family), Some(model)) => format!("{name} (family {family}, model {model})"),
             _ => name,
         }
     }
 }
 
-/// The first value of `name` in /proc/cpuinfo (Linux only).
-fn cpuinfo_field(name: &str) -> Option<String> {
-    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+/// The text of /proc/cpuinfo (Linux only).
+fn cpuinfo() -> Option<String> {
+    std::fs::read_to_string("/proc/cpuinfo").ok()
+}
+
+/// The first value of `key` in /proc/cpuinfo's text `info`.
+fn cpuinfo_field<'a>(info: &'a str, key: &str) -> Option<&'a str> {
     info.lines()
         .filter_map(|l| l.split_once(':'))
-        .find(|(key, _)| key.trim() == name)
-        .map(|(_, value)| value.trim().to_owned())
+        .find(|(k, _)| k.trim() == key)
+        .map(|(_, value)| value.trim())
+}
+
+/// The CPU's model name from /proc/cpuinfo's text, or the architecture
+/// where it is not known.
+fn cpu_name(info: Option<&str>) -> String {
+    info.and_then(|i| cpuinfo_field(i, "model name"))
+        .map_or_else(|| std::env::consts::ARCH.to_owned(), str::to_owned)
 }
 
 /// A scene's reference: how it was made and how noisy it is.
