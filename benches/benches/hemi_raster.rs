@@ -4,7 +4,8 @@
 //!   (the frame's posed geometry, visibility, SH integration and shading),
 //!   cycling through the scene's frames, with the two-level hierarchy and
 //!   flat, each with and without potentially visible sets built from the
-//!   scene's frames (§3.2), on every SIMD path the CPU runs; and the skinning of the human
+//!   scene's frames (§3.2), on every SIMD path the CPU runs, and with a
+//!   64² plane table (§3.1.1) instead of 128²; and the skinning of the human
 //!   (glTF joints and morphs to posed vertices), which a renderer adds per
 //!   frame.
 //! - Table 2 (printed before the measurements): where one update's time goes
@@ -35,30 +36,51 @@ fn scenes() -> Vec<Scene> {
 }
 
 fn configs() -> Vec<(String, Config)> {
-    let mut out = Vec::new();
-    for simd in Simd::available().into_iter().rev() {
-        for (label, pvs) in [("two-level", Pvs::Off), ("two-level+pvs", Pvs::EVERY_FRAME)] {
-            out.push((
-                format!("{label}/{simd:?}"),
-                Config {
-                    simd,
-                    pvs,
-                    ..Config::default()
-                },
-            ));
-        }
-    }
-    for (label, pvs) in [("flat", Pvs::Off), ("flat+pvs", Pvs::EVERY_FRAME)] {
-        out.push((
-            format!("{label}/Auto"),
+    let mut variants: Vec<(String, Config)> = Simd::available()
+        .into_iter()
+        .rev()
+        .map(|simd| {
+            let config = Config {
+                simd,
+                ..Config::default()
+            };
+            (format!("two-level/{simd:?}"), config)
+        })
+        .collect();
+    // The 64² plane table: the fastest setup found that stays within the
+    // issue's accuracy aim (hemi-raster's README, "What each option costs
+    // in accuracy").
+    for (label, config) in [
+        (
+            "two-level+lut64",
             Config {
-                hierarchy: Hierarchy::Flat,
-                pvs,
+                lut_resolution: 64,
                 ..Config::default()
             },
-        ));
+        ),
+        (
+            "flat",
+            Config {
+                hierarchy: Hierarchy::Flat,
+                ..Config::default()
+            },
+        ),
+    ] {
+        variants.push((format!("{label}/Auto"), config));
     }
-    out
+    // Each without and with potentially visible sets from every frame.
+    let with_pvs = |(label, config): &(String, Config)| {
+        let (name, path) = label.split_once('/').expect("name/path");
+        let pvs = Config {
+            pvs: Pvs::EVERY_FRAME,
+            ..*config
+        };
+        [
+            (label.clone(), *config),
+            (format!("{name}+pvs/{path}"), pvs),
+        ]
+    };
+    variants.iter().flat_map(with_pvs).collect()
 }
 
 /// Table 2, printed: one profiled update per scene and hierarchy.
