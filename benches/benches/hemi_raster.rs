@@ -21,7 +21,7 @@ use harness::gltf::GltfAsset;
 use harness::report::MachineInfo;
 use harness::scenes;
 use hemi_raster::{Config, HemiRaster, Hierarchy, Pvs, Simd};
-use shadow_core::{Scene, ShadowMethod};
+use shadow_core::{Scene, ShadowMethod, Stage};
 
 /// The paper's three scene kinds that we have: cloth, a skinned character
 /// (its "Fight"), moving chess pieces.
@@ -115,25 +115,31 @@ fn print_split() {
                 ..Config::default()
             });
             method.prepare(&scene).expect("prepare");
-            method.update(&frame).expect("warm-up update");
+            method
+                .update(&frame, scene.camera())
+                .expect("warm-up update");
             let p = method.profile_update(&frame).expect("profiled update");
-            let total = p.total().as_secs_f64();
-            let share = |d: std::time::Duration| 100.0 * d.as_secs_f64() / total;
-            let per_vertex = |n: u64| n as f64 / p.receivers as f64;
+            let seconds = |name| p.seconds_in(Stage::Update, name).expect("profiled part");
+            let count = |name| p.count_in(Stage::Update, name).expect("profiled count");
+            let parts = ["gather", "transform", "rasterization", "integration"];
+            let total: f64 = parts.iter().map(|name| seconds(name)).sum();
+            let share = |name| 100.0 * seconds(name) / total;
+            let per_vertex = |n: u64| n as f64 / count("receivers") as f64;
             println!(
                 "{:<8} {:<10} {:>6} {:>7} {:>10.1} {:>8.1}% {:>8.1}% {:>10.1}% {:>6.1}% {:>8.1}%   {:.1} ms, {:.2} ns per pair",
                 scene.name(),
                 label,
                 scene.vertex_count(),
                 scene.triangle_count(),
-                per_vertex(p.candidates),
-                100.0 * p.survivors as f64 / p.candidates as f64,
-                share(p.transform),
-                share(p.rasterization),
-                share(p.integration),
-                share(p.gather),
+                per_vertex(count("candidates")),
+                100.0 * count("survivors") as f64 / count("candidates") as f64,
+                share("transform"),
+                share("rasterization"),
+                share("integration"),
+                share("gather"),
                 total * 1e3,
-                (p.transform + p.rasterization).as_secs_f64() * 1e9 / p.candidates as f64,
+                (seconds("transform") + seconds("rasterization")) * 1e9
+                    / count("candidates") as f64,
             );
         }
     }
@@ -160,7 +166,7 @@ fn table1(c: &mut Criterion) {
                     let i = next % frames.len();
                     next += 1;
                     let geometry = scene.frame_geometry(i).expect("frame");
-                    method.update(&geometry).expect("update");
+                    method.update(&geometry, scene.camera()).expect("update");
                     method.shade(scene.camera().eye).expect("shade")
                 })
             });

@@ -27,7 +27,7 @@ fn frame_per_method(c: &mut Criterion) {
             method.relight(&env).expect("relight");
             group.bench_function(BenchmarkId::from_parameter(name), |b| {
                 b.iter(|| {
-                    method.update(&frame).expect("update");
+                    method.update(&frame, scene.camera()).expect("update");
                     method.shade(eye).expect("shade")
                 })
             });

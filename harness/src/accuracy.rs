@@ -14,14 +14,14 @@
 //! order, whose radiance error is the floor that SH truncation sets under
 //! that environment: no order-5 transfer method can do better.
 
-use std::{f32::consts::FRAC_1_PI, fmt::Write, num::NonZeroU32, path::Path, time::Instant};
+use std::{f32::consts::FRAC_1_PI, fmt::Write, num::NonZeroU32, path::Path};
 
 use glam::Vec3;
 use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution, Pvs};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shadow_core::{
-    Environment, Error, Result, Scene, ShadowMethod,
+    Environment, Error, Export, Result, Scene,
     sh::{self, ShOrder, ShRgb, Zonal},
 };
 
@@ -33,7 +33,7 @@ use crate::{
         transfer::{TransferReference, TransferSettings, scene_transfer_references},
     },
     report::{MachineInfo, ReferenceInfo},
-    run::median,
+    run::{self, References},
     score::{ErrorStats, against},
 };
 
@@ -674,8 +674,8 @@ impl Bounds {
     }
 }
 
-/// Runs one configuration over every frame: radiance and (for the SH
-/// integrations) transfer error, and the time of update + shade.
+/// Runs one configuration over every frame through [`crate::run`]: radiance
+/// and (for the SH integrations) transfer error, and the time per frame.
 fn run_variant(
     variant: &Variant,
     scene: &Scene,
@@ -685,63 +685,41 @@ fn run_variant(
     repeats: usize,
 ) -> Result<Row> {
     let mut method = HemiRaster::new(variant.config);
-    method.prepare(scene)?;
-    // Lighting first, so that each update does all of a new frame's work
-    // (with direct integration, the sum over the visible pixels).
-    method.relight(environment)?;
-    let eye = scene.camera().eye;
     let n = variant.config.order.coeff_count();
     let has_transfer = variant.config.integration != Integration::Direct;
     let mut score = TransferScore::default();
     let mut breakdown = BreakdownBuilder::new(scene);
-    let mut errors = Vec::new();
-    let mut frame_seconds = Vec::new();
-    let mut transfer = Vec::new();
-    for (index, (rad, reference)) in radiance.iter().zip(references).enumerate() {
-        let frame = scene.frame_geometry(index)?;
-        let (mut update, mut shade) = (Vec::new(), Vec::new());
-        let mut shading = None;
-        for _ in 0..repeats.max(1) {
-            let start = Instant::now();
-            method.update(&frame)?;
-            update.push(start.elapsed().as_secs_f64());
-            let start = Instant::now();
-            shading = Some(method.shade(eye)?);
-            shade.push(start.elapsed().as_secs_f64());
-        }
-        frame_seconds.push(median(update) + median(shade));
-        let shading = shading.expect("at least one repeat");
-        let values: Vec<Vec3> = shading.flat().collect();
-        errors.push(against(&values, rad));
-        if has_transfer {
-            transfer.clear();
-            for (o, object) in frame.objects.iter().enumerate() {
-                for v in 0..object.vertex_count() {
-                    let t = method.transfer(o, v).ok_or_else(|| {
-                        Error::stage(
-                            method.name(),
-                            format!("no transfer for vertex {v} of object {o}"),
-                        )
-                    })?;
-                    transfer.extend_from_slice(t);
-                }
+    let result = run::run_inspecting(
+        &mut method,
+        scene,
+        environment,
+        References::vertices(radiance),
+        repeats,
+        |index, method| {
+            if !has_transfer {
+                return Ok(());
             }
+            let Export::Transfer(transfer) = method.export()? else {
+                return Err(Error::stage(method.name(), "exported no SH transfer"));
+            };
+            let reference = &references[index];
             score.add_each(
-                &transfer,
+                &transfer.coefficients,
                 reference.mean(),
                 Some(reference.std_error()),
                 n,
                 |v, error| breakdown.add(v, error),
-            )?;
-        }
-    }
+            )
+        },
+    )?;
+    let errors: Vec<ErrorStats> = result.frames.iter().map(|f| f.vertex).collect();
     Ok(Row {
         name: variant.name.to_string(),
         what: variant.what.to_string(),
         transfer: has_transfer.then(|| score.summary()),
         breakdown: has_transfer.then(|| breakdown.finish()),
         radiance: RadianceError::over_frames(&errors),
-        frame_ms: Some(median(frame_seconds) * 1e3),
+        frame_ms: Some(result.frame_seconds() * 1e3),
     })
 }
 

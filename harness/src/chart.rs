@@ -40,12 +40,26 @@ pub struct Axes<'a> {
 }
 
 impl Axes<'_> {
-    /// The report's: exit radiance against the converged reference.
+    /// The report's, per vertex: exit radiance against the converged reference.
     pub const RADIANCE: Axes<'static> = Axes {
-        title: "Time per frame against error (lower left is better)",
-        error: "relative L2 error against the reference (%)",
+        title: "Per vertex: time per frame against error (lower left is better)",
+        error: "relative L2 error over vertices against the reference (%)",
         time: "update + shade per frame (ms)",
     };
+
+    /// The report's, per pixel.
+    pub const IMAGE: Axes<'static> = Axes {
+        title: "Per pixel: time per image against error (lower left is better)",
+        error: "relative L2 error over covered pixels against the reference (%)",
+        time: "update + render per image (ms)",
+    };
+}
+
+/// Makes the embedded font plotters' "sans-serif". Registering twice is
+/// harmless: the first registration stays.
+pub(crate) fn register_font() -> std::result::Result<(), &'static str> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
+        .map_err(|_| "invalid embedded font")
 }
 
 /// Draws `points` to a PNG at `path`, written atomically.
@@ -65,9 +79,7 @@ fn draw(
     axes: Axes,
     rgb: &mut [u8],
 ) -> std::result::Result<(), Box<dyn std::error::Error>> {
-    // Registering twice is harmless: the first registration stays.
-    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
-        .map_err(|_| "invalid embedded font")?;
+    register_font()?;
     let xy = |p: &Point| (p.error_percent.max(1e-3), p.frame_ms.max(1e-3));
     let (x_min, x_max) = bounds(points.iter().map(|p| xy(p).0));
     let (y_min, y_max) = bounds(points.iter().map(|p| xy(p).1));

@@ -1,12 +1,42 @@
-//! Per-vertex results as CSV or JSON, for other tools to check.
+//! Results for other tools: per-vertex radiance as CSV or JSON, and what a
+//! method computed (its [`Export`]) as a NumPy `.npz` archive.
+//!
+//! # The `.npz` layout
+//!
+//! `f = numpy.load("out.npz")` gives, for every kind:
+//!
+//! | array | dtype, shape | what |
+//! |---|---|---|
+//! | `meta` | unicode, 0-d | JSON (`json.loads(str(f["meta"]))`): `kind`, `method`, `scene`, `frame`, the conventions below in words, and each object's material (e.g. `{"Lambert": {"albedo": [0.8, 0.8, 0.8]}}`) |
+//! | `object_offsets` | int64, (objects + 1) | object `o` is rows `offsets[o]..offsets[o+1]` of the per-vertex arrays |
+//! | `positions`, `normals` | float32, (V, 3) | world space at the exported frame (metres, +Y up) |
+//!
+//! Kind `sh_transfer` (`hemi-raster`): `transfer`, float32 (V, n²), world
+//! space. Column l² + l + m holds coefficient (l, m) of the real,
+//! orthonormal SH basis without the Condon–Shortley phase, polar axis +Y,
+//! φ from +X toward +Z (`shadow_core::sh`). With `L` (n², 3) the lighting's
+//! SH coefficients in that basis, `E = transfer @ L` is each vertex's
+//! irradiance and `albedo / π · E` its Lambert radiance. A glossy term is
+//! view-dependent and is not in the transfer.
+//!
+//! Kind `directional_visibility`: `directions`, float32 (k, 3), unit,
+//! toward the light; `weights`, float32 (k), solid angles in steradians
+//! summing to 4π; `visible`, uint8 (V, ⌈k/8⌉), bit j of vertex i set when
+//! direction j is visible from it, unpacked by
+//! `numpy.unpackbits(f["visible"], axis=1, count=k, bitorder="little")`.
+//! With `I` (k, 3) the radiance arriving from each direction,
+//! `E = (V · weights · max(0, normals @ directions.T)) @ I`.
 
 use std::{fmt::Write, path::Path};
 
 use glam::Vec3;
 use serde::Serialize;
-use shadow_core::{Error, FrameGeometry, Result, VertexRadiance};
+use shadow_core::{Error, Export, FrameGeometry, Result, Scene, VertexRadiance};
 
-use crate::io::write_atomic;
+use crate::{
+    io::write_atomic,
+    npz::{self, Array},
+};
 
 /// One vertex's row.
 #[derive(Serialize)]
@@ -61,6 +91,115 @@ pub fn write_vertices(path: &Path, frame: &FrameGeometry, values: &VertexRadianc
     write_atomic(path, &bytes)
 }
 
+/// Where an export came from, for its `meta`.
+#[derive(Clone, Copy, Debug)]
+pub struct Provenance<'a> {
+    pub method: &'a str,
+    pub scene: &'a Scene,
+    pub frame: &'a FrameGeometry,
+}
+
+/// Writes `export` to `path` as an `.npz` archive in the layout of the
+/// module docs, atomically. Fails when the export's vertex counts are not the
+/// frame's.
+pub fn write_npz(path: &Path, export: &Export, from: Provenance) -> Result<()> {
+    let counts: Vec<usize> = from
+        .frame
+        .objects
+        .iter()
+        .map(|o| o.vertex_count())
+        .collect();
+    if export.vertex_counts() != counts {
+        return Err(Error::format(
+            path,
+            format!(
+                "the export has {:?} vertices per object, the frame {counts:?}",
+                export.vertex_counts()
+            ),
+        ));
+    }
+    let vertices: usize = counts.iter().sum();
+    let mut offsets = vec![0i64];
+    for n in &counts {
+        offsets.push(offsets.last().copied().unwrap_or(0) + *n as i64);
+    }
+    let flat = |f: fn(&shadow_core::Mesh) -> &[Vec3]| -> Vec<f32> {
+        from.frame
+            .objects
+            .iter()
+            .flat_map(|o| f(o).iter().flat_map(|v| v.to_array()))
+            .collect()
+    };
+    let materials: Vec<serde_json::Value> = from
+        .scene
+        .objects()
+        .iter()
+        .map(|o| serde_json::to_value(o.material).unwrap_or_default())
+        .collect();
+    let mut meta = serde_json::json!({
+        "method": from.method,
+        "scene": from.scene.name(),
+        "frame": from.frame.frame,
+        "materials": materials,
+        "space": "world: right-handed, +Y up, metres",
+    });
+    let mut arrays = vec![
+        ("object_offsets", Array::i64(&[offsets.len()], &offsets)),
+        (
+            "positions",
+            Array::f32(&[vertices, 3], &flat(|m| m.positions())),
+        ),
+    ];
+    let normals: Vec<f32> = match export {
+        Export::Visibility(v) => v.normals.iter().flat_map(|n| n.to_array()).collect(),
+        _ => flat(|m| m.normals()),
+    };
+    arrays.push(("normals", Array::f32(&[vertices, 3], &normals)));
+    match export {
+        Export::Transfer(t) => {
+            let n = t.order.coeff_count();
+            meta["kind"] = "sh_transfer".into();
+            meta["sh"] = serde_json::json!({
+                "order": t.order.get(),
+                "coefficients": n,
+                "index": "column l*l + l + m holds (l, m)",
+                "basis": "real, orthonormal, no Condon-Shortley phase, polar axis +Y, phi from +X toward +Z",
+                "use": "irradiance E = transfer @ L; Lambert radiance = albedo / pi * E",
+            });
+            arrays.push(("transfer", Array::f32(&[vertices, n], &t.coefficients)));
+        }
+        Export::Visibility(v) => {
+            let k = v.directions.len();
+            let bytes = k.div_ceil(8);
+            let packed: Vec<u8> = (0..vertices)
+                .flat_map(|i| {
+                    let words = &v.visible[i * v.words_per_vertex()..][..v.words_per_vertex()];
+                    words
+                        .iter()
+                        .flat_map(|w| w.to_le_bytes())
+                        .take(bytes)
+                        .collect::<Vec<_>>()
+                })
+                .collect();
+            let directions: Vec<f32> = v.directions.iter().flat_map(|d| d.to_array()).collect();
+            meta["kind"] = "directional_visibility".into();
+            meta["use"] = "E = (unpackbits(visible, axis=1, count=k, bitorder='little') * weights * max(0, normals @ directions.T)) @ I".into();
+            arrays.push(("directions", Array::f32(&[k, 3], &directions)));
+            arrays.push(("weights", Array::f32(&[k], &v.weights)));
+            arrays.push(("visible", Array::u8(&[vertices, bytes], &packed)));
+        }
+        _ => {
+            return Err(Error::format(
+                path,
+                "this kind of export has no .npz layout",
+            ));
+        }
+    }
+    arrays.push(("meta", Array::text(&meta.to_string())));
+    let bytes = npz::archive(&arrays).map_err(|e| Error::io(path, e))?;
+    write_atomic(path, &bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -89,6 +228,7 @@ mod tests {
             VertexRadiance {
                 radiance,
                 std_error,
+                evaluated: None,
             },
         )
     }

@@ -1,20 +1,25 @@
 //! The `harness` command: list scenes, compute references, run methods, and
 //! write the comparison report.
 
-use std::{path::PathBuf, time::Instant};
+use std::{
+    path::{Path, PathBuf},
+    time::Instant,
+};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use harness::{
     accuracy::{self, AccuracyReport, Plan},
-    export, methods,
-    reference::{self, ReferenceCache, ReferenceSettings, transfer::TransferSettings},
-    report::{MachineInfo, ReferenceInfo, Report},
-    run,
+    export, images, methods,
+    reference::{
+        self, ImageReference, ReferenceCache, ReferenceSettings, transfer::TransferSettings,
+    },
+    report::{ImageReferenceInfo, MachineInfo, ReferenceInfo, Report},
+    run::{self, References},
     scenes::{self, ENVIRONMENTS, SCENES},
 };
 use indicatif::{ProgressBar, ProgressStyle};
-use shadow_core::{Environment, Scene};
+use shadow_core::{Camera, Environment, Scene, raster::MAX_IMAGE_SIZE};
 
 #[derive(Parser)]
 #[command(
@@ -52,9 +57,15 @@ enum Command {
         /// Repeats per stage; medians are reported.
         #[arg(long, default_value_t = 3)]
         repeats: usize,
+        #[command(flatten)]
+        image: ImageArgs,
         /// Write the method's per-vertex results of the last frame to this .csv or .json file.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Write what the method computed for the last frame (SH transfer
+        /// vectors, or visibility over directions) to this .npz file, for numpy.
+        #[arg(long)]
+        export: Option<PathBuf>,
     },
     /// Run every method on every built-in scene and write report.md and report.json.
     Report {
@@ -68,6 +79,8 @@ enum Command {
         estimator: EstimatorArgs,
         #[arg(long, default_value_t = 3)]
         repeats: usize,
+        #[command(flatten)]
+        image: ImageArgs,
     },
     /// Score hemi-raster's options (hierarchy, plane table, mask, integration)
     /// by Kautz et al.'s transfer error and by radiance error; write
@@ -116,6 +129,39 @@ struct Input {
     /// or an OpenEXR file; default: the scene's own.
     #[arg(long)]
     env: Option<String>,
+}
+
+#[derive(Args)]
+struct ImageArgs {
+    /// Width in pixels of the images scored per pixel (the scene camera's
+    /// aspect kept); 512 matches the papers' comparisons.
+    #[arg(long = "image", default_value_t = DEFAULT_IMAGE_WIDTH,
+          value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_IMAGE_SIZE)))]
+    width: u32,
+    /// Target relative L2 noise of the per-pixel reference.
+    #[arg(long, default_value_t = ReferenceSettings::IMAGE.target_noise.unwrap_or(0.01))]
+    image_target: f32,
+    /// Write each scene's images here: per method the image (linear .exr and
+    /// tone-mapped .png) and an error heat map, and the reference.
+    #[arg(long)]
+    images: Option<PathBuf>,
+}
+
+/// The default width of scored images.
+const DEFAULT_IMAGE_WIDTH: u32 = 160;
+
+impl ImageArgs {
+    fn camera(&self, scene: &Scene) -> Result<Camera> {
+        Ok(scene.camera().with_width(self.width)?)
+    }
+
+    fn settings(&self, estimator: &EstimatorArgs) -> ReferenceSettings {
+        ReferenceSettings {
+            seed: estimator.seed,
+            target_noise: Some(self.image_target),
+            ..ReferenceSettings::IMAGE
+        }
+    }
 }
 
 #[derive(Args)]
@@ -196,14 +242,64 @@ fn references(
         vertices: scene.vertex_count(),
         noise: refs.iter().map(|r| r.noise).fold(0.0, f32::max),
         rays: refs.iter().map(|r| r.rays).sum(),
-        seconds: if cached {
-            0.0
-        } else {
-            start.elapsed().as_secs_f64()
-        },
+        seconds: seconds_spent(cached, start),
+        cached,
+        image: None,
+    };
+    Ok((refs, info))
+}
+
+/// Seconds since `start`, or 0 when the result came from the cache.
+fn seconds_spent(cached: bool, start: Instant) -> f64 {
+    if cached {
+        0.0
+    } else {
+        start.elapsed().as_secs_f64()
+    }
+}
+
+/// The per-pixel references of every frame seen through `camera`, and what
+/// they cost.
+fn image_references(
+    scene: &Scene,
+    env: &Environment,
+    camera: &Camera,
+    settings: &ReferenceSettings,
+    args: &EstimatorArgs,
+) -> Result<(Vec<ImageReference>, ImageReferenceInfo)> {
+    let bar = progress(&format!("image reference {}", scene.name()));
+    let start = Instant::now();
+    let cache = ReferenceCache::new(&args.cache);
+    let (refs, cached) =
+        reference::scene_image_references(scene, env, camera, settings, Some(&cache), &bar)?;
+    bar.finish_and_clear();
+    let info = ImageReferenceInfo {
+        width: camera.width,
+        height: camera.height,
+        pixels: refs
+            .iter()
+            .map(|r| r.image.covered.iter().filter(|c| **c).count())
+            .sum(),
+        noise: refs.iter().map(|r| r.noise).fold(0.0, f32::max),
+        rays: refs.iter().map(|r| r.rays).sum(),
+        seconds: seconds_spent(cached, start),
         cached,
     };
     Ok((refs, info))
+}
+
+/// Fails unless the folder `path` would be written into exists: checked
+/// before any work, so that a typo costs nothing and leaves nothing behind.
+fn check_output(path: &Path) -> Result<()> {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+    match parent {
+        Some(dir) if !dir.is_dir() => bail!(
+            "cannot write {}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        ),
+        _ => Ok(()),
+    }
 }
 
 fn main() -> Result<()> {
@@ -253,36 +349,116 @@ fn main() -> Result<()> {
             input,
             estimator,
             repeats,
+            image,
             out,
+            export: export_path,
         } => {
+            for path in out.iter().chain(&export_path) {
+                check_output(path)?;
+            }
             let (scene, env) = input.load()?;
             let mut m = methods::by_name(&method)?;
+            if export_path.is_some() && !m.capabilities().export {
+                bail!(
+                    "{} has nothing to export (it does not support {})",
+                    m.name(),
+                    shadow_core::Capability::Export
+                );
+            }
             let (refs, info) = references(&scene, &env, &estimator)?;
-            let result = run::run(m.as_mut(), &scene, &env, &refs, repeats)?;
+            let camera = image.camera(&scene)?;
+            let (image_refs, image_info) = image_references(
+                &scene,
+                &env,
+                &camera,
+                &image.settings(&estimator),
+                &estimator,
+            )?;
+            let references = References {
+                vertex: &refs,
+                image: Some((&camera, &image_refs)),
+            };
+            let mut exported = None;
+            let last = scene.frames().len() - 1;
+            let result =
+                run::run_inspecting(m.as_mut(), &scene, &env, references, repeats, |i, m| {
+                    if export_path.is_some() && i == last {
+                        exported = Some(m.export()?);
+                    }
+                    Ok(())
+                })?;
             println!(
-                "{} on {} under {} (reference noise {:.3}%)",
+                "{} on {} under {} (reference noise {:.3}% per vertex, {:.3}% per pixel at {}×{})",
                 result.method,
                 result.scene,
                 result.environment,
-                info.noise * 100.0
+                info.noise * 100.0,
+                image_info.noise * 100.0,
+                camera.width,
+                camera.height
             );
-            println!("frame  error    p99      max      update ms  relight ms  shade ms");
+            println!(
+                "frame  vertex error  p99      max      image error  p99      max      update ms  shade ms  render ms  relight ms"
+            );
             for f in &result.frames {
+                let image = f.image.map_or_else(
+                    || format!("{:>11}  {:>7}  {:>7}", "–", "–", "–"),
+                    |e| {
+                        format!(
+                            "{:>10.2}%  {:>6.1}%  {:>6.1}%",
+                            e.relative_l2 * 100.0,
+                            e.p99 * 100.0,
+                            e.max * 100.0
+                        )
+                    },
+                );
                 println!(
-                    "{:>5}  {:>6.2}%  {:>6.1}%  {:>6.1}%  {:>9.2}  {:>10.2}  {:>8.2}",
+                    "{:>5}  {:>11.2}%  {:>6.1}%  {:>6.1}%  {image}  {:>9.2}  {:>8.2}  {:>9.2}  {:>10.2}",
                     f.frame,
-                    f.error.relative_l2 * 100.0,
-                    f.error.p99 * 100.0,
-                    f.error.max * 100.0,
+                    f.vertex.relative_l2 * 100.0,
+                    f.vertex.p99 * 100.0,
+                    f.vertex.max * 100.0,
                     f.times.update * 1e3,
+                    f.times.shade * 1e3,
+                    f.times.render.unwrap_or(0.0) * 1e3,
                     f.times.relight * 1e3,
-                    f.times.shade * 1e3
+                );
+                if !f.profile.is_empty() {
+                    for line in f.profile.to_string().lines() {
+                        println!("       {line}");
+                    }
+                }
+            }
+            if result.evaluated_fraction() < 1.0 {
+                println!(
+                    "vertex errors are over the {:.1}% of vertices the method evaluated",
+                    result.evaluated_fraction() * 100.0
                 );
             }
+            println!(
+                "time per frame: {:.2} ms per vertex (update + shade), {} per image (update + render)",
+                result.frame_seconds() * 1e3,
+                result
+                    .image_frame_seconds()
+                    .map_or("–".into(), |s| format!("{:.2} ms", s * 1e3))
+            );
             if let (Some(path), Some(shading)) = (out, &result.last_shading) {
-                let last = scene.frames().len() - 1;
                 export::write_vertices(&path, &scene.frame_geometry(last)?, shading)?;
                 println!("wrote {}", path.display());
+            }
+            if let (Some(path), Some(exported)) = (export_path, exported) {
+                let frame = scene.frame_geometry(last)?;
+                let from = export::Provenance {
+                    method: &result.method,
+                    scene: &scene,
+                    frame: &frame,
+                };
+                export::write_npz(&path, &exported, from)?;
+                println!("wrote {}", path.display());
+            }
+            if let Some(dir) = &image.images {
+                images::write_scene(dir, scene.name(), &image_refs[last].image, &[&result])?;
+                println!("wrote the images in {}", dir.join(scene.name()).display());
             }
         }
         Command::Report {
@@ -290,6 +466,7 @@ fn main() -> Result<()> {
             dir,
             estimator,
             repeats,
+            image,
         } => {
             let specs: Vec<_> = SCENES
                 .iter()
@@ -307,17 +484,30 @@ fn main() -> Result<()> {
             for spec in specs {
                 let scene = scenes::builtin(spec.name)?;
                 let env = scenes::environment(spec.environment)?;
-                let (refs, info) = references(&scene, &env, &estimator)?;
+                let (refs, mut info) = references(&scene, &env, &estimator)?;
+                let camera = image.camera(&scene)?;
+                let settings = image.settings(&estimator);
+                let (image_refs, image_info) =
+                    image_references(&scene, &env, &camera, &settings, &estimator)?;
+                info.image = Some(image_info);
                 report.references.push(info);
+                let references = References {
+                    vertex: &refs,
+                    image: Some((&camera, &image_refs)),
+                };
+                let first_run = report.runs.len();
                 for name in methods::REPORT_METHODS {
                     let mut m = methods::by_name(name)?;
-                    match run::run(m.as_mut(), &scene, &env, &refs, repeats) {
+                    match run::run(m.as_mut(), &scene, &env, references, repeats) {
                         Ok(result) => {
                             eprintln!(
-                                "{:<10} {:<14} error {:.2}%",
+                                "{:<10} {:<20} error {:.2}% per vertex, {} per pixel",
                                 spec.name,
                                 name,
-                                result.mean_error() * 100.0
+                                result.mean_error() * 100.0,
+                                result
+                                    .mean_image_error()
+                                    .map_or("–".into(), |e| format!("{:.2}%", e * 100.0))
                             );
                             report.runs.push(result);
                         }
@@ -333,10 +523,14 @@ fn main() -> Result<()> {
                         }
                     }
                 }
+                if let (Some(images_dir), Some(reference)) = (&image.images, image_refs.last()) {
+                    let runs: Vec<_> = report.runs[first_run..].iter().collect();
+                    images::write_scene(images_dir, scene.name(), &reference.image, &runs)?;
+                }
             }
             report.write(&dir)?;
             println!(
-                "wrote report.md, report.json and speed-vs-error.png in {}",
+                "wrote report.md, report.json and the speed-vs-error charts in {}",
                 dir.display()
             );
         }

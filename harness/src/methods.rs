@@ -24,7 +24,11 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "raytrace:N",
-        "Monte-Carlo ray tracing, N MIS iterations per vertex (e.g. raytrace:16)",
+        "Monte-Carlo ray tracing, N MIS iterations per vertex and per pixel (e.g. raytrace:16)",
+    ),
+    (
+        "raytrace:N:vertex",
+        "the same per vertex, its images interpolated from the vertices as a per-vertex method's",
     ),
 ];
 
@@ -37,6 +41,7 @@ pub const REPORT_METHODS: &[&str] = &[
     "raytrace:4",
     "raytrace:16",
     "raytrace:64",
+    "raytrace:64:vertex",
 ];
 
 /// Builds a method from its name.
@@ -65,17 +70,29 @@ pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
         return Ok(Box::new(hemi_raster::HemiRaster::new(config)));
     }
     if let Some(n) = name.strip_prefix("raytrace:") {
-        let iterations: u32 = n.parse().ok().filter(|&i| i >= 2).ok_or_else(|| {
-            Error::InvalidScene(format!(
-                "raytrace:{n}: the iteration count must be an integer ≥ 2"
-            ))
+        let (count, vertex) = match n.strip_suffix(":vertex") {
+            Some(count) => (count, true),
+            None => (n, false),
+        };
+        let iterations: u32 = count.parse().ok().filter(|&i| i >= 2).ok_or_else(|| {
+            Error::config(
+                name,
+                "the iteration count must be an integer ≥ 2 (raytrace:N or raytrace:N:vertex)",
+            )
         })?;
-        return Ok(Box::new(RayTrace::new(iterations, 0xba5e)));
+        return Ok(Box::new(if vertex {
+            RayTrace::per_vertex(iterations, 0xba5e)
+        } else {
+            RayTrace::new(iterations, 0xba5e)
+        }));
     }
-    Err(Error::InvalidScene(format!(
-        "unknown method {name:?}; methods are {}",
-        METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
-    )))
+    Err(Error::config(
+        name,
+        format!(
+            "no such method; methods are {}",
+            METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
+        ),
+    ))
 }
 
 #[cfg(test)]
@@ -100,6 +117,11 @@ mod tests {
             "hemi-raster-pvs"
         );
         assert!(by_name("raytrace:1").is_err());
+        assert!(by_name("raytrace:1:vertex").is_err());
+        assert_eq!(
+            by_name("raytrace:8:vertex").unwrap().name(),
+            "raytrace-8-vertex"
+        );
         let unknown = by_name("nonesuch").err().map(|e| e.to_string());
         assert!(unknown.is_some_and(|e| e.contains("unshadowed")));
     }

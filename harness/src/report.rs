@@ -9,11 +9,9 @@ use shadow_core::Result;
 use crate::{
     chart::{Axes, Point, speed_vs_error},
     io::{write_atomic, write_json_atomic},
-    run::RunResult,
+    run::{FrameResult, RunResult},
+    score::ErrorStats,
 };
-
-/// The chart's file name beside the report.
-const CHART: &str = "speed-vs-error.png";
 
 /// Where and how the numbers were measured.
 #[derive(Clone, Debug, Serialize)]
@@ -75,7 +73,7 @@ fn cpu_name(info: Option<&str>) -> String {
         .map_or_else(|| std::env::consts::ARCH.to_owned(), str::to_owned)
 }
 
-/// A scene's reference: how it was made and how noisy it is.
+/// A scene's references: how they were made and how noisy they are.
 #[derive(Clone, Debug, Serialize)]
 pub struct ReferenceInfo {
     pub scene: String,
@@ -88,7 +86,26 @@ pub struct ReferenceInfo {
     /// Seconds spent computing it (0 when every frame came from the cache).
     pub seconds: f64,
     pub cached: bool,
+    /// The per-pixel reference, when images are scored.
+    pub image: Option<ImageReferenceInfo>,
 }
+
+/// A scene's per-pixel reference.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImageReferenceInfo {
+    pub width: u32,
+    pub height: u32,
+    /// Covered pixels, summed over frames.
+    pub pixels: usize,
+    /// Worst per-frame relative L2 noise over the covered pixels.
+    pub noise: f32,
+    pub rays: u64,
+    pub seconds: f64,
+    pub cached: bool,
+}
+
+/// The chart files beside the report.
+const CHARTS: [&str; 2] = ["speed-vs-error.png", "speed-vs-error-image.png"];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -100,11 +117,12 @@ pub struct Report {
 }
 
 impl Report {
-    /// Writes `report.json`, `report.md` and the speed-versus-error chart
-    /// `speed-vs-error.png` into `dir`, each atomically.
+    /// Writes `report.json`, `report.md` and the speed-versus-error charts
+    /// (per vertex, and per pixel when images were scored) into `dir`, each
+    /// atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
         write_json_atomic(&dir.join("report.json"), self)?;
-        let points: Vec<Point> = (self.runs.iter())
+        let vertex: Vec<Point> = (self.runs.iter())
             .map(|r| Point {
                 series: r.method.clone(),
                 label: r.scene.clone(),
@@ -112,12 +130,26 @@ impl Report {
                 frame_ms: r.frame_seconds() * 1e3,
             })
             .collect();
-        speed_vs_error(&points, Axes::RADIANCE, &dir.join(CHART))?;
+        speed_vs_error(&vertex, Axes::RADIANCE, &dir.join(CHARTS[0]))?;
+        let image: Vec<Point> = (self.runs.iter())
+            .filter_map(|r| {
+                Some(Point {
+                    series: r.method.clone(),
+                    label: r.scene.clone(),
+                    error_percent: r.mean_image_error()? as f64 * 100.0,
+                    frame_ms: r.image_frame_seconds()? * 1e3,
+                })
+            })
+            .collect();
+        if !image.is_empty() {
+            speed_vs_error(&image, Axes::IMAGE, &dir.join(CHARTS[1]))?;
+        }
         write_atomic(&dir.join("report.md"), self.markdown().as_bytes())
     }
 
     pub fn markdown(&self) -> String {
         let m = &self.machine;
+        let images = self.runs.iter().any(|r| r.image_size.is_some());
         let mut s = String::new();
         let _ = writeln!(s, "# Soft-shadow methods compared\n");
         let _ = writeln!(
@@ -132,62 +164,131 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "Error is the relative L2 error over all vertices against the Monte-Carlo reference, \
-             averaged over frames; p99 and max are per-vertex relative errors (floor 1% of the RMS \
-             radiance); \"ref noise\" is the reference's own relative L2 noise, below which errors \
-             cannot be told apart. Times are medians of repeated runs, wall clock (a frame is not repeated once its stages took 2 s).\n"
+            "Errors are relative L2 errors against the Monte-Carlo reference, averaged over frames: \
+             per vertex over the vertices a method evaluated, per pixel over the pixels the reference \
+             covers (a pixel the method leaves uncovered counts as zero). p99 and max are per-element \
+             relative errors (floor 1% of the RMS radiance), the worst over frames; \"noise\" is the \
+             reference's own relative L2 noise, below which errors cannot be told apart. Time per \
+             frame is update + shade per vertex, update + render per image; relighting is timed \
+             apart. Times are medians of repeated runs, wall clock (a frame is not repeated once its \
+             stages took 2 s).\n"
         );
         let _ = writeln!(s, "## References\n");
         let _ = writeln!(
             s,
-            "| scene | environment | frames | vertices | noise | rays | seconds |"
+            "| scene | environment | frames | vertices | noise | rays | seconds | image | image noise | image seconds |"
         );
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|");
-        for r in &self.references {
-            let secs = if r.cached {
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        let secs = |cached: bool, seconds: f64| {
+            if cached {
                 "cached".to_string()
             } else {
-                format!("{:.1}", r.seconds)
+                format!("{seconds:.1}")
+            }
+        };
+        for r in &self.references {
+            let (size, noise, seconds) = match &r.image {
+                Some(i) => (
+                    format!("{}×{}", i.width, i.height),
+                    format!("{:.3}%", i.noise * 100.0),
+                    secs(i.cached, i.seconds),
+                ),
+                None => ("–".into(), "–".into(), "–".into()),
             };
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.3}% | {} | {} |",
+                "| {} | {} | {} | {} | {:.3}% | {} | {} | {size} | {noise} | {seconds} |",
                 r.scene,
                 r.environment,
                 r.frames,
                 r.vertices,
                 r.noise * 100.0,
                 r.rays,
-                secs
+                secs(r.cached, r.seconds),
             );
         }
         let _ = writeln!(s, "\n## Methods\n");
-        let _ = writeln!(s, "![time per frame against error]({CHART})\n");
         let _ = writeln!(
             s,
-            "| scene | method | error | p99 | max | prepare ms | update ms | relight ms | shade ms | frame ms |"
+            "![time per frame against error, per vertex]({})\n",
+            CHARTS[0]
         );
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
-        for r in &self.runs {
-            let p99 = r.frames.iter().map(|f| f.error.p99).fold(0.0, f32::max);
-            let max = r.frames.iter().map(|f| f.error.max).fold(0.0, f32::max);
-            let t = |f: fn(&crate::run::StageTimes) -> f64| {
-                crate::run::median(r.frames.iter().map(|fr| f(&fr.times) * 1e3).collect())
-            };
+        if images {
             let _ = writeln!(
                 s,
-                "| {} | {} | {:.2}% | {:.1}% | {:.1}% | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                "![time per image against error, per pixel]({})\n",
+                CHARTS[1]
+            );
+        }
+        let _ = writeln!(
+            s,
+            "| scene | method | vertex error | p99 | max | frame ms | image error | p99 | max | image ms | relight ms | prepare ms |"
+        );
+        let _ = writeln!(
+            s,
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
+        for r in &self.runs {
+            let worst = |f: fn(&ErrorStats) -> f32,
+                         domain: fn(&FrameResult) -> Option<ErrorStats>| {
+                let values: Option<Vec<f32>> = r
+                    .frames
+                    .iter()
+                    .map(|fr| domain(fr).map(|e| f(&e)))
+                    .collect();
+                values.map(|v| v.into_iter().fold(0.0, f32::max))
+            };
+            let vertex = |fr: &FrameResult| Some(fr.vertex);
+            let image = |fr: &FrameResult| fr.image;
+            let percent = |v: Option<f32>, digits: usize| {
+                v.map_or("–".to_string(), |v| format!("{:.*}%", digits, v * 100.0))
+            };
+            let ms = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{:.2}", v * 1e3));
+            let evaluated = r.evaluated_fraction();
+            let vertex_error = if evaluated < 1.0 {
+                format!(
+                    "{:.2}% ({:.0}% of vertices)",
+                    r.mean_error() * 100.0,
+                    evaluated * 100.0
+                )
+            } else {
+                format!("{:.2}%", r.mean_error() * 100.0)
+            };
+            let first = r.frames.first().map(|f| f.times);
+            let _ = writeln!(
+                s,
+                "| {} | {} | {vertex_error} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 r.scene,
                 r.method,
-                r.mean_error() * 100.0,
-                p99 * 100.0,
-                max * 100.0,
-                t(|t| t.prepare),
-                t(|t| t.update),
-                t(|t| t.relight),
-                t(|t| t.shade),
-                r.frame_seconds() * 1e3,
+                percent(worst(|e| e.p99, vertex), 1),
+                percent(worst(|e| e.max, vertex), 1),
+                ms(Some(r.frame_seconds())),
+                percent(r.mean_image_error(), 2),
+                percent(worst(|e| e.p99, image), 1),
+                percent(worst(|e| e.max, image), 1),
+                ms(r.image_frame_seconds()),
+                ms(first.map(|t| t.relight)),
+                ms(first.map(|t| t.prepare)),
             );
+        }
+        let profiled: Vec<&RunResult> = (self.runs.iter())
+            .filter(|r| r.frames.iter().any(|f| !f.profile.is_empty()))
+            .collect();
+        if !profiled.is_empty() {
+            let _ = writeln!(s, "\n## Where the time goes\n");
+            let _ = writeln!(
+                s,
+                "Each method's own breakdown of its stages, on the middle frame (medians over repeats).\n"
+            );
+            for r in profiled {
+                let frame = &r.frames[r.frames.len() / 2];
+                let text = frame.profile.to_string().replace('\n', "; ");
+                let _ = writeln!(
+                    s,
+                    "- {} on {} (frame {}): {text}",
+                    r.method, r.scene, frame.frame
+                );
+            }
         }
         if !self.skipped.is_empty() {
             let _ = writeln!(s, "\n## Not run\n");

@@ -2,8 +2,9 @@
 
 use glam::Vec3;
 use serde::Serialize;
+use shadow_core::{Error, Image, Result, VertexRadiance};
 
-use crate::reference::VertexReference;
+use crate::reference::{ImageReference, VertexReference};
 
 /// How far a method's values are from the reference's, over a domain (all
 /// vertices of a frame, or all covered pixels).
@@ -37,6 +38,63 @@ pub fn against(values: &[Vec3], reference: &VertexReference) -> ErrorStats {
         .as_ref()
         .map(|s| s.iter().flatten().copied().collect());
     compare(values, &expected, se.as_deref())
+}
+
+/// Scores the vertices `shading` evaluated against a vertex reference: a
+/// method that skips vertices is scored over the ones it evaluated, and
+/// [`ErrorStats::count`] says how many those were.
+pub fn vertices(shading: &VertexRadiance, reference: &VertexReference) -> ErrorStats {
+    if shading.evaluated.is_none() {
+        return against(&shading.flat().collect::<Vec<_>>(), reference);
+    }
+    let se = reference.radiance.std_error.as_ref();
+    let se: Vec<Vec3> = se
+        .map(|s| s.iter().flatten().copied().collect())
+        .unwrap_or_default();
+    let (mut values, mut expected, mut errors) = (Vec::new(), Vec::new(), Vec::new());
+    let rows = shading.flat().zip(shading.flat_evaluated());
+    for (i, ((x, evaluated), r)) in rows.zip(reference.radiance.flat()).enumerate() {
+        if evaluated {
+            values.push(x);
+            expected.push(r);
+            errors.extend(se.get(i));
+        }
+    }
+    compare(
+        &values,
+        &expected,
+        (!se.is_empty()).then_some(errors.as_slice()),
+    )
+}
+
+/// Scores `image` over the pixels `reference` covers: a pixel the method
+/// leaves uncovered counts as zero radiance, one it covers outside the
+/// reference's surfaces is background and not scored. Fails if the sizes
+/// differ.
+pub fn image(image: &Image, reference: &ImageReference) -> Result<ErrorStats> {
+    let r = &reference.image;
+    if (image.width, image.height) != (r.width, r.height) {
+        return Err(Error::InvalidScene(format!(
+            "image {}×{} scored against a {}×{} reference",
+            image.width, image.height, r.width, r.height
+        )));
+    }
+    let scored = || (0..r.pixels.len()).filter(|&i| r.covered[i]);
+    let values: Vec<Vec3> = scored()
+        .map(|i| {
+            if image.covered[i] {
+                image.pixels[i]
+            } else {
+                Vec3::ZERO
+            }
+        })
+        .collect();
+    let expected: Vec<Vec3> = scored().map(|i| r.pixels[i]).collect();
+    let se: Option<Vec<Vec3>> = r
+        .std_error
+        .as_ref()
+        .map(|se| scored().map(|i| se[i]).collect());
+    Ok(compare(&values, &expected, se.as_deref()))
 }
 
 /// Compares `values` with `reference` element by element; `std_error` is the

@@ -86,7 +86,7 @@ fn white_furnace_gives_albedo_for_reference_and_unshadowed() {
 
     let mut unshadowed = Unshadowed::new(ShOrder::new(5).unwrap());
     unshadowed.prepare(&scene).unwrap();
-    unshadowed.update(&frame).unwrap();
+    unshadowed.update(&frame, scene.camera()).unwrap();
     unshadowed.relight(&env).unwrap();
     for x in unshadowed.shade(scene.camera().eye).unwrap().flat() {
         approx::assert_relative_eq!(x, Vec3::splat(rho), max_relative = 1e-4);

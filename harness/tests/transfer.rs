@@ -294,7 +294,7 @@ fn hemi_raster_agrees_with_the_reference() {
     let r = transfer_reference(&frame, &replicated(256), &ProgressBar::hidden()).unwrap();
     let mut method = HemiRaster::default();
     method.prepare(&scene).unwrap();
-    method.update(&frame).unwrap();
+    method.update(&frame, scene.camera()).unwrap();
     let floor = 81 * 25;
     let mut score = TransferScore::default();
     score
@@ -336,6 +336,7 @@ fn the_accuracy_table_of_a_small_scene() {
         rays: radiance.rays,
         seconds: radiance.seconds,
         cached: false,
+        image: None,
     };
     let plan = accuracy::Plan {
         transfer: replicated(64),

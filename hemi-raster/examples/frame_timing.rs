@@ -89,7 +89,9 @@ fn main() -> Result<()> {
         let updates = (0..5)
             .map(|_| {
                 let start = Instant::now();
-                method.update(&frame).map(|()| start.elapsed())
+                method
+                    .update(&frame, scene.camera())
+                    .map(|()| start.elapsed())
             })
             .collect::<Result<Vec<_>>>()?;
         let start = Instant::now();

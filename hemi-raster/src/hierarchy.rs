@@ -751,7 +751,9 @@ mod tests {
     fn blocked(config: Config, scene: &Scene, f: usize) -> (HemiRaster, Vec<f32>) {
         let mut method = HemiRaster::new(config);
         method.prepare(scene).unwrap();
-        method.update(&scene.frame_geometry(f).unwrap()).unwrap();
+        method
+            .update(&scene.frame_geometry(f).unwrap(), scene.camera())
+            .unwrap();
         let mut out = Vec::new();
         for (o, object) in scene.objects().iter().enumerate() {
             for v in 0..object.mesh.vertex_count() {

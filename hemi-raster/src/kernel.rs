@@ -75,7 +75,7 @@ impl Simd {
         match self {
             Simd::Auto => Ok(*available.last().unwrap_or(&Simd::Portable)),
             s if available.contains(&s) => Ok(s),
-            s => Err(Error::stage(
+            s => Err(Error::config(
                 "hemi-raster",
                 format!("the {s:?} path was asked for, but this CPU only runs {available:?}"),
             )),

@@ -22,7 +22,7 @@ pub use disk::{BLOCK, DiskGrid};
 pub use kernel::Simd;
 pub use lut::PlaneLut;
 pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
-pub use method::{HemiRaster, UpdateProfile};
+pub use method::HemiRaster;
 pub use rasterize::{Rasterizer, TangentFrame};
 pub use transfer::{
     Integration, LOBE_CUTOFF, LobeGrid, PhongLobe, TangentBasis, direct_glossy, direct_irradiance,

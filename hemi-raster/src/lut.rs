@@ -65,7 +65,7 @@ impl<W: MaskRow> PlaneLut<W> {
             .map(|n| n / 2);
         let bytes = cells.and_then(|n| n.checked_mul(std::mem::size_of::<Mask<W>>()));
         if resolution < 2 || resolution % 2 == 1 || bytes.is_none_or(|b| b > MAX_BYTES) {
-            return Err(Error::stage(
+            return Err(Error::config(
                 "hemi-raster",
                 format!(
                     "plane LUT resolution {resolution} per cube face must be even, at least 2, \

@@ -8,8 +8,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 use shadow_core::sh::{self, ShOrder, ShRgb};
 use shadow_core::{
-    Brdf, Camera, Capabilities, Environment, Error, FrameGeometry, Image, Result, Scene,
-    ShadowMethod, VertexRadiance,
+    Brdf, Camera, Capabilities, Environment, Error, Export, FrameGeometry, Image, Profile, Result,
+    Scene, ShTransfer, ShadowMethod, Stage, TransferSpace, VertexRadiance,
 };
 
 use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution, Pvs};
@@ -77,6 +77,8 @@ pub struct HemiRaster {
     lighting: Option<Lighting>,
     /// Per vertex, Direct integration only: the shadowed irradiance.
     irradiance: Option<Vec<Vec3>>,
+    /// What the last calls of the stages measured.
+    profile: Profile,
 }
 
 struct Prepared {
@@ -90,11 +92,12 @@ struct Prepared {
     visible: Option<VisibleSets>,
 }
 
-/// Where one [`HemiRaster::profile_update`] spent its time, on one thread:
-/// the split of Kautz et al.'s Table 2 ("transform includes backface culling
-/// and view transformation of blockers") and the counts behind its Table 1.
+/// Where one profiled update spent its time, on one thread: the split of
+/// Kautz et al.'s Table 2 ("transform includes backface culling and view
+/// transformation of blockers") and the counts behind its Table 1, as
+/// [`HemiRaster::profile_update`] reports them.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct UpdateProfile {
+struct UpdateProfile {
     /// Receivers (vertices, all objects).
     pub receivers: usize,
     /// Blocker triangles considered, summed over receivers: divided by
@@ -115,9 +118,16 @@ pub struct UpdateProfile {
 }
 
 impl UpdateProfile {
-    /// The whole update.
-    pub fn total(&self) -> Duration {
-        self.gather + self.transform + self.rasterization + self.integration
+    /// Into `profile`'s update entries.
+    fn record(&self, profile: &mut Profile) {
+        let update = Stage::Update;
+        profile.seconds(update, "gather", self.gather.as_secs_f64());
+        profile.seconds(update, "transform", self.transform.as_secs_f64());
+        profile.seconds(update, "rasterization", self.rasterization.as_secs_f64());
+        profile.seconds(update, "integration", self.integration.as_secs_f64());
+        profile.count(update, "receivers", self.receivers as u64);
+        profile.count(update, "candidates", self.candidates);
+        profile.count(update, "survivors", self.survivors);
     }
 }
 
@@ -301,6 +311,7 @@ impl HemiRaster {
             transfer: Vec::new(),
             lighting: None,
             irradiance: None,
+            profile: Profile::default(),
         }
     }
 
@@ -348,18 +359,23 @@ impl HemiRaster {
         (vertex < *counts.get(object)?).then(|| counts[..object].iter().sum::<usize>() + vertex)
     }
 
-    /// Runs [`ShadowMethod::update`] on one thread with its stages timed:
-    /// the split of the paper's Table 2 and the blocker counts of its Table 1.
-    /// The masks and transfer vectors are those `update` computes; only the
-    /// time differs (one thread, plus two clock reads per receiver).
-    pub fn profile_update(&mut self, frame: &FrameGeometry) -> Result<UpdateProfile> {
+    /// Runs [`ShadowMethod::update`] on one thread with its stages timed,
+    /// and returns the profile: the update's split of the paper's Table 2
+    /// (seconds of "gather", "transform", "rasterization", "integration")
+    /// and the blocker counts of its Table 1 ("receivers", "candidates",
+    /// "survivors"). The masks and transfer vectors are those `update`
+    /// computes; only the time differs (one thread, plus two clock reads per
+    /// receiver). A plain `update` records "visibility" and "integration"
+    /// only.
+    pub fn profile_update(&mut self, frame: &FrameGeometry) -> Result<Profile> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .build()
             .map_err(|e| Error::stage(NAME, format!("no thread pool for profiling: {e}")))?;
-        let mut profile = UpdateProfile::default();
-        pool.install(|| self.update_frame(frame, Some(&mut profile)))?;
-        Ok(profile)
+        let mut split = UpdateProfile::default();
+        pool.install(|| self.update_frame(frame, Some(&mut split)))?;
+        split.record(&mut self.profile);
+        Ok(self.profile.clone())
     }
 
     /// `update`, optionally profiled.
@@ -398,8 +414,14 @@ impl HemiRaster {
         self.blockers = Some(blockers);
         self.frame = Some(frame.clone());
         self.integrate_direct();
+        let integration = start.elapsed() - visibility;
+        self.profile.begin(Stage::Update);
+        self.profile
+            .seconds(Stage::Update, "visibility", visibility.as_secs_f64());
+        self.profile
+            .seconds(Stage::Update, "integration", integration.as_secs_f64());
         if let Some(p) = profile {
-            p.integration = start.elapsed() - visibility;
+            p.integration = integration;
             // Gathering the frame's blockers and corner arrays, the rest.
             p.gather = visibility.saturating_sub(p.transform + p.rasterization);
         }
@@ -455,7 +477,8 @@ impl ShadowMethod for HemiRaster {
         }
     }
 
-    /// Any geometry, any number of objects; Lambert and Phong, per vertex.
+    /// Any geometry, any number of objects; Lambert and Phong, per vertex;
+    /// export of the transfer vectors with the SH integrations.
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             deforming_meshes: true,
@@ -463,6 +486,7 @@ impl ShadowMethod for HemiRaster {
             multiple_objects: true,
             glossy_brdf: true,
             per_pixel: false,
+            export: self.config.integration != Integration::Direct,
         }
     }
 
@@ -538,7 +562,7 @@ impl ShadowMethod for HemiRaster {
 
     /// Rasterizes every triangle of the frame into every vertex's mask (in
     /// parallel over vertices), then integrates the transfer vectors.
-    fn update(&mut self, frame: &FrameGeometry) -> Result<()> {
+    fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         self.update_frame(frame, None)
     }
 
@@ -639,10 +663,7 @@ impl ShadowMethod for HemiRaster {
                     .collect()
             })
             .collect();
-        Ok(VertexRadiance {
-            radiance,
-            std_error: None,
-        })
+        Ok(VertexRadiance::new(radiance))
     }
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {
@@ -652,6 +673,37 @@ impl ShadowMethod for HemiRaster {
             .as_ref()
             .ok_or_else(|| Error::stage(NAME, "render before update"))?;
         shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
+    }
+
+    fn profile(&self) -> Profile {
+        self.profile.clone()
+    }
+
+    /// The current frame's world-space transfer vectors (without ρ/π) of
+    /// the configured order: the diffuse part of every vertex's shading. A
+    /// Phong object's glossy term depends on the view and is computed in
+    /// `shade`, not exported. With [`Integration::Direct`] there is no
+    /// transfer vector: an [`Error::InvalidConfig`].
+    fn export(&self) -> Result<Export> {
+        if self.config.integration == Integration::Direct {
+            return Err(Error::config(
+                NAME,
+                "direct integration computes no SH transfer to export; use an SH integration",
+            ));
+        }
+        let prepared = self
+            .scene
+            .as_ref()
+            .ok_or_else(|| Error::stage(NAME, "export before prepare"))?;
+        if self.frame.is_none() {
+            return Err(Error::stage(NAME, "export before update"));
+        }
+        Ok(Export::Transfer(ShTransfer::new(
+            self.config.order,
+            TransferSpace::World,
+            prepared.vertex_counts.clone(),
+            self.transfer.clone(),
+        )?))
     }
 }
 
@@ -714,7 +766,9 @@ mod tests {
 
     fn run(method: &mut HemiRaster, scene: &Scene, env: &Environment) -> VertexRadiance {
         method.prepare(scene).unwrap();
-        method.update(&scene.frame_geometry(0).unwrap()).unwrap();
+        method
+            .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+            .unwrap();
         method.relight(env).unwrap();
         method.shade(scene.camera().eye).unwrap()
     }
@@ -837,7 +891,9 @@ mod tests {
         assert_eq!(method.transfer(0, 40).unwrap(), &transfer[..]);
         let brighter = method.shade(Vec3::ZERO).unwrap().radiance[0][40].x;
         assert!((brighter - 2.0 * before).abs() < 1e-5);
-        method.update(&scene.frame_geometry(1).unwrap()).unwrap();
+        method
+            .update(&scene.frame_geometry(1).unwrap(), scene.camera())
+            .unwrap();
         let after = method.shade(Vec3::ZERO).unwrap().radiance[0][40].x;
         assert!(after > 1.5 * before && after > 1.55, "{before} → {after}");
     }
@@ -848,13 +904,13 @@ mod tests {
         let frame = scene.frame_geometry(0).unwrap();
         let mut method = HemiRaster::default();
         let stage = |e: Error| matches!(e, Error::Stage { .. });
-        assert!(stage(method.update(&frame).unwrap_err()));
+        assert!(stage(method.update(&frame, scene.camera()).unwrap_err()));
         assert!(stage(method.shade(Vec3::ZERO).unwrap_err()));
         method.prepare(&scene).unwrap();
         assert!(method.lut_build_time().is_some());
         assert!(stage(method.shade(Vec3::ZERO).unwrap_err()));
         assert!(stage(method.render(&camera()).unwrap_err()));
-        method.update(&frame).unwrap();
+        method.update(&frame, scene.camera()).unwrap();
         assert!(stage(method.shade(Vec3::ZERO).unwrap_err()));
         method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
         assert!(method.shade(Vec3::ZERO).is_ok());
@@ -870,7 +926,7 @@ mod tests {
         )
         .unwrap();
         let msg = method
-            .update(&other.frame_geometry(0).unwrap())
+            .update(&other.frame_geometry(0).unwrap(), other.camera())
             .unwrap_err()
             .to_string();
         assert!(msg.contains("vertex counts"), "{msg}");
@@ -892,7 +948,7 @@ mod tests {
             assert!(msg.contains("object 0"), "{msg}");
         }
         method.prepare(&scene).unwrap();
-        method.update(&frame).unwrap();
+        method.update(&frame, scene.camera()).unwrap();
         let msg = method.shade(Vec3::NAN).unwrap_err().to_string();
         assert!(msg.contains("eye"), "{msg}");
         // A table too large to build.
@@ -980,7 +1036,7 @@ mod tests {
         for config in configs() {
             let mut method = HemiRaster::new(config);
             method.prepare(&scene).unwrap();
-            method.update(&frame).unwrap();
+            method.update(&frame, scene.camera()).unwrap();
             method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
             let shaded = method.shade(eye).unwrap();
             let worst = shaded

@@ -246,7 +246,9 @@ mod tests {
     use std::sync::Arc;
 
     use glam::{Affine3A, Quat, Vec3};
-    use shadow_core::{Brdf, Camera, Frame, Mesh, Object, Pose, Scene, ShadowMethod};
+    use shadow_core::{
+        Brdf, Camera, Frame, Mesh, Object, Pose, Profile, Scene, ShadowMethod, Stage,
+    };
 
     use crate::config::{Config, Hierarchy, Pvs};
     use crate::method::HemiRaster;
@@ -353,11 +355,12 @@ mod tests {
                     "{hierarchy:?}, frame {f}"
                 );
                 shadowed += blocked(&all, &scene).iter().filter(|&&b| b > 0.05).count();
+                let candidates = |p: &Profile| p.count_in(Stage::Update, "candidates").unwrap();
                 assert!(
-                    3 * visible.candidates < every.candidates,
+                    3 * candidates(&visible) < candidates(&every),
                     "{hierarchy:?}, frame {f}: {} of {} candidates",
-                    visible.candidates,
-                    every.candidates
+                    candidates(&visible),
+                    candidates(&every)
                 );
             }
             assert!(shadowed > 500, "the scene must shadow: {shadowed}");
@@ -377,8 +380,8 @@ mod tests {
         for hierarchy in hierarchies() {
             let mut all = prepared(hierarchy, Pvs::Off, &known);
             let mut sets = prepared(hierarchy, pvs, &known);
-            all.update(&between).unwrap();
-            sets.update(&between).unwrap();
+            all.update(&between, known.camera()).unwrap();
+            sets.update(&between, known.camera()).unwrap();
             let (every, visible) = (blocked(&all, &known), blocked(&sets, &known));
             for (v, (e, s)) in every.iter().zip(&visible).enumerate() {
                 assert!(s <= e, "{hierarchy:?}, vertex {v}: {s} > {e}");

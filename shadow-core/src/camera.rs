@@ -77,6 +77,15 @@ impl Camera {
         Camera::new(center + from * distance, center, up, fov_y, width, height)
     }
 
+    /// The same view with an image `width` pixels wide, the height following
+    /// the aspect ratio (rounded, at least one pixel). Fails for a zero width.
+    pub fn with_width(&self, width: u32) -> Result<Camera> {
+        let height = (f64::from(width) * f64::from(self.height) / f64::from(self.width))
+            .round()
+            .max(1.0) as u32;
+        Camera::new(self.eye, self.target, self.up, self.fov_y, width, height)
+    }
+
     pub fn aspect(&self) -> f32 {
         self.width as f32 / self.height as f32
     }
@@ -111,6 +120,15 @@ mod tests {
         assert_relative_eq!(cam.ray_direction(50, 50), Vec3::NEG_Z, epsilon = 1e-6);
         assert!(cam.ray_direction(50, 0).y > 0.0);
         assert!(cam.ray_direction(100, 50).x > 0.0);
+    }
+
+    #[test]
+    fn a_new_width_keeps_the_aspect() {
+        let cam = Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 640, 480).unwrap();
+        let small = cam.with_width(160).unwrap();
+        assert_eq!((small.width, small.height), (160, 120));
+        assert_eq!(cam.with_width(1).unwrap().height, 1);
+        assert!(cam.with_width(0).is_err());
     }
 
     #[test]

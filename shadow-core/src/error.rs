@@ -8,8 +8,9 @@ use crate::method::Capability;
 ///
 /// Errors about input name the input (a file path, or the object and element
 /// index) and what is wrong with it, so that a user can fix the file rather than
-/// guess.
+/// guess. New kinds of failure may be added: match with a wildcard arm.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A mesh failed validation.
     #[error("invalid mesh {name:?}: {what}")]
@@ -46,6 +47,11 @@ pub enum Error {
     #[error("{method}: {what}")]
     Stage { method: String, what: String },
 
+    /// A method was configured with settings it cannot run with (an
+    /// unknown name, a resolution out of range, a SIMD path the CPU lacks).
+    #[error("{method}: invalid configuration: {what}")]
+    InvalidConfig { method: String, what: String },
+
     /// No GPU adapter, device loss, shader or read-back failure.
     #[error("GPU: {0}")]
     Gpu(String),
@@ -67,6 +73,14 @@ impl Error {
     /// [`ShadowMethod`](crate::ShadowMethod)).
     pub fn stage(method: impl Into<String>, what: impl Into<String>) -> Self {
         Error::Stage {
+            method: method.into(),
+            what: what.into(),
+        }
+    }
+
+    /// A configuration `method` cannot run with.
+    pub fn config(method: impl Into<String>, what: impl Into<String>) -> Self {
+        Error::InvalidConfig {
             method: method.into(),
             what: what.into(),
         }

@@ -13,23 +13,37 @@ use shadow_core::{
 use crate::reference::{self, Estimator, ReferenceSettings};
 
 /// Monte-Carlo ray tracing with `iterations` MIS iterations per point (two
-/// shadow rays each at most).
+/// shadow rays each at most). Its images trace every pixel, or, made with
+/// [`RayTrace::per_vertex`], interpolate the vertices' results as the
+/// per-vertex methods do.
 pub struct RayTrace {
     name: String,
     settings: ReferenceSettings,
+    per_pixel: bool,
     scene: Option<Scene>,
     frame: Option<(FrameGeometry, SceneBvh)>,
     sampler: Option<EnvironmentSampler>,
 }
 
 impl RayTrace {
+    /// Images traced per pixel.
     pub fn new(iterations: u32, seed: u64) -> RayTrace {
         RayTrace {
             name: format!("raytrace-{iterations}"),
             settings: ReferenceSettings::fixed(iterations, seed),
+            per_pixel: true,
             scene: None,
             frame: None,
             sampler: None,
+        }
+    }
+
+    /// Images interpolated from the vertices' results.
+    pub fn per_vertex(iterations: u32, seed: u64) -> RayTrace {
+        RayTrace {
+            name: format!("raytrace-{iterations}-vertex"),
+            per_pixel: false,
+            ..RayTrace::new(iterations, seed)
         }
     }
 
@@ -63,8 +77,13 @@ impl ShadowMethod for RayTrace {
         &self.name
     }
 
+    /// Any scene; no export (its result is radiance, not visibility).
     fn capabilities(&self) -> Capabilities {
-        Capabilities::ALL
+        Capabilities {
+            per_pixel: self.per_pixel,
+            export: false,
+            ..Capabilities::ALL
+        }
     }
 
     fn prepare(&mut self, scene: &Scene) -> Result<()> {
@@ -75,7 +94,7 @@ impl ShadowMethod for RayTrace {
 
     /// Builds the BVH of the frame: all the visibility work that can be done
     /// before rays are traced.
-    fn update(&mut self, frame: &FrameGeometry) -> Result<()> {
+    fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         self.frame = Some((frame.clone(), SceneBvh::build(frame)?));
         Ok(())
     }
@@ -94,6 +113,11 @@ impl ShadowMethod for RayTrace {
     }
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {
+        if !self.per_pixel {
+            let shading = self.shade(camera.eye)?;
+            let (_, frame, _) = self.ready()?;
+            return shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance);
+        }
         let (scene, frame, estimator) = self.ready()?;
         let points = reference::pixel_points(scene, frame, estimator.bvh, camera);
         Ok(reference::image_from_points(
@@ -103,6 +127,6 @@ impl ShadowMethod for RayTrace {
             &self.settings,
             &ProgressBar::hidden(),
         )
-        .0)
+        .image)
     }
 }

@@ -45,6 +45,7 @@ impl ShadowMethod for Unshadowed {
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             per_pixel: false,
+            export: false,
             ..Capabilities::ALL
         }
     }
@@ -55,7 +56,7 @@ impl ShadowMethod for Unshadowed {
         Ok(())
     }
 
-    fn update(&mut self, frame: &FrameGeometry) -> Result<()> {
+    fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         self.frame = Some(frame.clone());
         Ok(())
     }
@@ -114,10 +115,7 @@ impl ShadowMethod for Unshadowed {
                     .collect()
             })
             .collect();
-        Ok(VertexRadiance {
-            radiance,
-            std_error: None,
-        })
+        Ok(VertexRadiance::new(radiance))
     }
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {

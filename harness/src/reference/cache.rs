@@ -1,26 +1,35 @@
-//! The on-disk cache of vertex references, keyed by a content hash of
-//! everything the result depends on. Files are written atomically and carry a
-//! checksum: a truncated or corrupted file is recomputed, never trusted.
+//! The on-disk cache of references (per vertex and per pixel), keyed by a
+//! content hash of everything the result depends on. Files are written
+//! atomically and carry a checksum: a truncated or corrupted file is
+//! recomputed, never trusted.
 
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use shadow_core::{Environment, FrameGeometry, Result, Scene, VertexRadiance};
+use shadow_core::{Camera, Environment, FrameGeometry, Image, Result, Scene, VertexRadiance};
 
-use super::{ReferenceSettings, VertexReference, split};
+use super::{ImageReference, ReferenceSettings, VertexReference, split};
 use crate::io::write_atomic;
 
 /// Bumped whenever the estimator or the file layout changes meaning.
-const FORMAT: &[u8; 8] = b"SSREF003";
+const FORMAT: &[u8; 8] = b"SSREF004";
 
-/// The content hash of a vertex reference's inputs: geometry (positions,
-/// normals, triangles of every object), materials, the environment's texels,
-/// the view point and the estimator settings.
+/// What a reference is of: the vertices seen from an eye, or the pixels of
+/// a camera's image.
+#[derive(Clone, Copy, Debug)]
+pub enum Domain<'a> {
+    Vertices { eye: Vec3 },
+    Pixels { camera: &'a Camera },
+}
+
+/// The content hash of a reference's inputs: geometry (positions, normals,
+/// triangles of every object), materials, the environment's texels, the view
+/// (eye, or the whole camera for images) and the estimator settings.
 pub fn cache_key(
     scene: &Scene,
     frame: &FrameGeometry,
     environment: &Environment,
-    eye: Vec3,
+    domain: Domain,
     settings: &ReferenceSettings,
 ) -> blake3::Hash {
     let mut h = blake3::Hasher::new();
@@ -33,7 +42,10 @@ pub fn cache_key(
     }
     h.update(&(environment.width() as u64).to_le_bytes());
     h.update(bytemuck::cast_slice(environment.texels()));
-    h.update(bytemuck::bytes_of(&eye));
+    match domain {
+        Domain::Vertices { eye } => h.update(bytemuck::bytes_of(&eye)),
+        Domain::Pixels { camera } => h.update(format!("pixels {camera:?}").as_bytes()),
+    };
     h.update(format!("{settings:?}").as_bytes());
     h.finalize()
 }
@@ -52,30 +64,48 @@ impl ReferenceCache {
         self.dir.join(format!("{}.ref", key.to_hex()))
     }
 
-    /// The cached reference for `key`, or `None` when absent, truncated, of
-    /// another format, or failing its checksum.
-    pub fn get(&self, key: &blake3::Hash, shape: &FrameGeometry) -> Option<VertexReference> {
+    fn read(&self, key: &blake3::Hash) -> Option<Record> {
         let bytes = std::fs::read(self.path(key)).ok()?;
-        decode(&bytes, key, shape)
+        Record::decode(&bytes, key)
     }
 
-    /// Stores a reference atomically.
-    pub fn put(&self, key: &blake3::Hash, reference: &VertexReference) -> Result<()> {
-        write_atomic(&self.path(key), &encode(key, reference))
+    fn write(&self, key: &blake3::Hash, record: &Record) -> Result<()> {
+        write_atomic(&self.path(key), &record.encode(key))
     }
 
-    /// The cached reference, or computes and stores it.
-    pub fn get_or_compute(
+    /// The cached vertex reference for `key` (of a frame shaped like
+    /// `shape`), or computes and stores it; also says whether it was cached.
+    /// A file that is absent, truncated, of another format or shape, or
+    /// fails its checksum is recomputed.
+    pub fn vertex(
         &self,
         key: &blake3::Hash,
         shape: &FrameGeometry,
         compute: impl FnOnce() -> Result<VertexReference>,
     ) -> Result<(VertexReference, bool)> {
-        if let Some(hit) = self.get(key, shape) {
-            return Ok((hit, true));
+        let vertices: usize = shape.objects.iter().map(|o| o.vertex_count()).sum();
+        let cached = self.read(key);
+        if let Some(record) = cached.filter(|r| r.mean.len() == vertices && r.covered.is_none()) {
+            return Ok((record.into_vertex(shape), true));
         }
         let fresh = compute()?;
-        self.put(key, &fresh)?;
+        self.write(key, &Record::of_vertex(&fresh))?;
+        Ok((fresh, false))
+    }
+
+    /// The cached image reference for `key` (of a `width × height` image),
+    /// or computes and stores it, as [`ReferenceCache::vertex`].
+    pub fn image(
+        &self,
+        key: &blake3::Hash,
+        (width, height): (u32, u32),
+        compute: impl FnOnce() -> Result<ImageReference>,
+    ) -> Result<(ImageReference, bool)> {
+        if let Some(reference) = self.read(key).and_then(|r| r.into_image(width, height)) {
+            return Ok((reference, true));
+        }
+        let fresh = compute()?;
+        self.write(key, &Record::of_image(&fresh))?;
         Ok((fresh, false))
     }
 
@@ -84,76 +114,178 @@ impl ReferenceCache {
     }
 }
 
-/// Layout: FORMAT, key (32), vertex count (u64), rays (u64), noise (f32),
-/// seconds (f64), means (n·Vec3), standard errors (n·Vec3), replicates (n·u32),
-/// then the blake3 hash of everything before it.
-fn encode(key: &blake3::Hash, r: &VertexReference) -> Vec<u8> {
-    let mean: Vec<Vec3> = r.radiance.flat().collect();
-    let se: Vec<Vec3> = r
-        .radiance
-        .std_error
-        .iter()
-        .flatten()
-        .flatten()
-        .copied()
-        .collect();
-    let mut out = Vec::new();
-    out.extend_from_slice(FORMAT);
-    out.extend_from_slice(key.as_bytes());
-    out.extend_from_slice(&(mean.len() as u64).to_le_bytes());
-    out.extend_from_slice(&r.rays.to_le_bytes());
-    out.extend_from_slice(&r.noise.to_le_bytes());
-    out.extend_from_slice(&r.seconds.to_le_bytes());
-    out.extend_from_slice(bytemuck::cast_slice(&mean));
-    out.extend_from_slice(bytemuck::cast_slice(&se));
-    out.extend_from_slice(bytemuck::cast_slice(&r.replicates));
-    let check = blake3::hash(&out);
-    out.extend_from_slice(check.as_bytes());
-    out
+/// What a file holds: per-point estimates, and for an image which pixels
+/// the points are (covered ones, in row order).
+struct Record {
+    rays: u64,
+    noise: f32,
+    seconds: f64,
+    mean: Vec<Vec3>,
+    std_error: Vec<Vec3>,
+    replicates: Vec<u32>,
+    /// `(width, height, covered)` of an image.
+    covered: Option<(u32, u32, Vec<bool>)>,
 }
 
-fn decode(bytes: &[u8], key: &blake3::Hash, shape: &FrameGeometry) -> Option<VertexReference> {
-    let (body, check) = bytes.split_at_checked(bytes.len().checked_sub(32)?)?;
-    if blake3::hash(body).as_bytes() != check {
-        return None;
+impl Record {
+    fn of_vertex(r: &VertexReference) -> Record {
+        Record {
+            rays: r.rays,
+            noise: r.noise,
+            seconds: r.seconds,
+            mean: r.radiance.flat().collect(),
+            std_error: r
+                .radiance
+                .std_error
+                .iter()
+                .flatten()
+                .flatten()
+                .copied()
+                .collect(),
+            replicates: r.replicates.clone(),
+            covered: None,
+        }
     }
-    let mut rest = body.strip_prefix(FORMAT)?.strip_prefix(key.as_bytes())?;
-    let mut take = |n: usize| -> Option<&[u8]> {
-        let (head, tail) = rest.split_at_checked(n)?;
-        rest = tail;
-        Some(head)
-    };
-    let n = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-    if n != shape
-        .objects
-        .iter()
-        .map(|o| o.vertex_count())
-        .sum::<usize>()
-    {
-        return None;
+
+    fn into_vertex(self, shape: &FrameGeometry) -> VertexReference {
+        VertexReference {
+            radiance: VertexRadiance {
+                radiance: split(shape, &self.mean),
+                std_error: Some(split(shape, &self.std_error)),
+                evaluated: None,
+            },
+            replicates: self.replicates,
+            rays: self.rays,
+            noise: self.noise,
+            seconds: self.seconds,
+        }
     }
-    let rays = u64::from_le_bytes(take(8)?.try_into().ok()?);
-    let noise = f32::from_le_bytes(take(4)?.try_into().ok()?);
-    let seconds = f64::from_le_bytes(take(8)?.try_into().ok()?);
-    let vec3s = |b: &[u8]| -> Vec<Vec3> {
-        b.chunks_exact(12)
-            .map(|c| Vec3::from_array(bytemuck::pod_read_unaligned(c)))
-            .collect()
-    };
-    let mean = vec3s(take(n * 12)?);
-    let se = vec3s(take(n * 12)?);
-    let replicates: Vec<u32> = take(n * 4)?
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    Some(VertexReference {
-        radiance: VertexRadiance {
-            radiance: split(shape, &mean),
-            std_error: Some(split(shape, &se)),
-        },
-        replicates,
-        rays,
-        noise,
-        seconds,
-    })
+
+    fn of_image(r: &ImageReference) -> Record {
+        let image = &r.image;
+        let covered = || (0..image.pixels.len()).filter(|&i| image.covered[i]);
+        let se = image.std_error.as_deref().unwrap_or(&[]);
+        Record {
+            rays: r.rays,
+            noise: r.noise,
+            seconds: r.seconds,
+            mean: covered().map(|i| image.pixels[i]).collect(),
+            std_error: covered()
+                .map(|i| se.get(i).copied().unwrap_or(Vec3::ZERO))
+                .collect(),
+            replicates: Vec::new(),
+            covered: Some((image.width, image.height, image.covered.clone())),
+        }
+    }
+
+    fn into_image(self, width: u32, height: u32) -> Option<ImageReference> {
+        let (w, h, covered) = self.covered?;
+        if (w, h) != (width, height) {
+            return None;
+        }
+        let mut pixels = vec![Vec3::ZERO; covered.len()];
+        let mut std_error = vec![Vec3::ZERO; covered.len()];
+        let slots = (0..covered.len()).filter(|&i| covered[i]);
+        for (k, slot) in slots.enumerate() {
+            pixels[slot] = self.mean[k];
+            std_error[slot] = self.std_error[k];
+        }
+        Some(ImageReference {
+            image: Image {
+                width,
+                height,
+                pixels,
+                covered,
+                std_error: Some(std_error),
+            },
+            rays: self.rays,
+            noise: self.noise,
+            seconds: self.seconds,
+        })
+    }
+
+    /// Layout: FORMAT, key (32), point count n (u64), rays (u64), noise
+    /// (f32), seconds (f64), means (n·Vec3), standard errors (n·Vec3),
+    /// replicate count r (u64) and replicates (r·u32), image flag (u8) and,
+    /// for an image, width and height (u32 each) and one byte per pixel
+    /// (covered or not); then the blake3 hash of everything before it.
+    fn encode(&self, key: &blake3::Hash) -> Vec<u8> {
+        let mut out = Vec::new();
+        out.extend_from_slice(FORMAT);
+        out.extend_from_slice(key.as_bytes());
+        out.extend_from_slice(&(self.mean.len() as u64).to_le_bytes());
+        out.extend_from_slice(&self.rays.to_le_bytes());
+        out.extend_from_slice(&self.noise.to_le_bytes());
+        out.extend_from_slice(&self.seconds.to_le_bytes());
+        out.extend_from_slice(bytemuck::cast_slice(&self.mean));
+        out.extend_from_slice(bytemuck::cast_slice(&self.std_error));
+        out.extend_from_slice(&(self.replicates.len() as u64).to_le_bytes());
+        out.extend_from_slice(bytemuck::cast_slice(&self.replicates));
+        match &self.covered {
+            None => out.push(0),
+            Some((width, height, covered)) => {
+                out.push(1);
+                out.extend_from_slice(&width.to_le_bytes());
+                out.extend_from_slice(&height.to_le_bytes());
+                out.extend(covered.iter().map(|&c| u8::from(c)));
+            }
+        }
+        let check = blake3::hash(&out);
+        out.extend_from_slice(check.as_bytes());
+        out
+    }
+
+    fn decode(bytes: &[u8], key: &blake3::Hash) -> Option<Record> {
+        let (body, check) = bytes.split_at_checked(bytes.len().checked_sub(32)?)?;
+        if blake3::hash(body).as_bytes() != check {
+            return None;
+        }
+        let mut rest = body.strip_prefix(FORMAT)?.strip_prefix(key.as_bytes())?;
+        let mut take = |n: usize| -> Option<&[u8]> {
+            let (head, tail) = rest.split_at_checked(n)?;
+            rest = tail;
+            Some(head)
+        };
+        let u64_at = |b: &[u8]| u64::from_le_bytes(b.try_into().expect("8 bytes"));
+        let u32_at = |b: &[u8]| u32::from_le_bytes(b.try_into().expect("4 bytes"));
+        let vec3s = |b: &[u8]| -> Vec<Vec3> {
+            b.chunks_exact(12)
+                .map(|c| Vec3::from_array(bytemuck::pod_read_unaligned(c)))
+                .collect()
+        };
+        let n = usize::try_from(u64_at(take(8)?)).ok()?;
+        let rays = u64_at(take(8)?);
+        let noise = f32::from_le_bytes(take(4)?.try_into().ok()?);
+        let seconds = f64::from_le_bytes(take(8)?.try_into().ok()?);
+        let mean = vec3s(take(n.checked_mul(12)?)?);
+        let std_error = vec3s(take(n * 12)?);
+        let r = usize::try_from(u64_at(take(8)?)).ok()?;
+        let replicates = take(r.checked_mul(4)?)?
+            .chunks_exact(4)
+            .map(u32_at)
+            .collect();
+        let covered = match take(1)?[0] {
+            0 => None,
+            1 => {
+                let width = u32_at(take(4)?);
+                let height = u32_at(take(4)?);
+                let pixels = (width as usize).checked_mul(height as usize)?;
+                let covered: Vec<bool> = take(pixels)?.iter().map(|&b| b == 1).collect();
+                if covered.iter().filter(|c| **c).count() != n {
+                    return None;
+                }
+                Some((width, height, covered))
+            }
+            _ => return None,
+        };
+        Some(Record {
+            rays,
+            noise,
+            seconds,
+            mean,
+            std_error,
+            replicates,
+            covered,
+        })
+    }
 }

@@ -18,7 +18,7 @@ use shadow_core::{
     environment::EnvironmentSampler,
 };
 
-pub use cache::{ReferenceCache, cache_key};
+pub use cache::{Domain, ReferenceCache, cache_key};
 pub use estimator::{Accumulator, Estimator, ShadingPoint, stream};
 
 /// How long the estimator runs.
@@ -49,6 +49,18 @@ impl ReferenceSettings {
         min_replicates: 4,
         max_replicates: 1 << 14,
         target_noise: Some(0.005),
+    };
+
+    /// A converged image: 1% relative noise over the covered pixels,
+    /// replicates of 64 iterations, at most 2¹² replicates a pixel. Pixels
+    /// are many and each one's noise is averaged with its neighbours' by
+    /// the eye, so the target is looser than per vertex.
+    pub const IMAGE: ReferenceSettings = ReferenceSettings {
+        seed: 0x5eed,
+        replicate_size: 64,
+        min_replicates: 4,
+        max_replicates: 1 << 12,
+        target_noise: Some(0.01),
     };
 
     /// Exactly `iterations` per point in one stratified replicate, no
@@ -333,8 +345,19 @@ pub fn vertex_reference(
     })
 }
 
-/// Estimates outgoing radiance at the surface seen through every pixel; also
-/// returns the estimate's relative noise (`None` with one replicate).
+/// A reference image: outgoing radiance at the surface seen through the
+/// centre of every pixel, with standard errors.
+#[derive(Clone, Debug)]
+pub struct ImageReference {
+    pub image: Image,
+    pub rays: u64,
+    /// The relative L2 noise over the covered pixels, `sqrt(Σ|SE|² / Σ|L|²)`
+    /// (infinite without standard errors).
+    pub noise: f32,
+    pub seconds: f64,
+}
+
+/// Estimates outgoing radiance at the surface seen through every pixel.
 pub fn pixel_reference(
     scene: &Scene,
     frame: &FrameGeometry,
@@ -342,27 +365,24 @@ pub fn pixel_reference(
     camera: &Camera,
     settings: &ReferenceSettings,
     progress: &ProgressBar,
-) -> Result<(Image, Option<f32>)> {
+) -> Result<ImageReference> {
+    let start = Instant::now();
     let setup = Setup::new(frame, environment)?;
     let pixels = pixel_points(scene, frame, &setup.bvh, camera);
-    Ok(image_from_points(
-        camera,
-        &pixels,
-        &setup.estimator(),
-        settings,
-        progress,
-    ))
+    let mut reference = image_from_points(camera, &pixels, &setup.estimator(), settings, progress);
+    reference.seconds = start.elapsed().as_secs_f64();
+    Ok(reference)
 }
 
-/// Runs the estimator at the covered pixels of `pixels` and assembles the image
-/// and its relative noise.
+/// Runs the estimator at the covered pixels of `pixels` and assembles the
+/// image, its noise and the rays it took (time not measured).
 pub fn image_from_points(
     camera: &Camera,
     pixels: &[Option<ShadingPoint>],
     estimator: &Estimator,
     settings: &ReferenceSettings,
     progress: &ProgressBar,
-) -> (Image, Option<f32>) {
+) -> ImageReference {
     let covered: Vec<bool> = pixels.iter().map(Option::is_some).collect();
     let points: Vec<ShadingPoint> = pixels.iter().flatten().copied().collect();
     let est = estimate(&points, estimator, settings, progress);
@@ -388,7 +408,12 @@ pub fn image_from_points(
             errors[slot] = se[k];
         }
     }
-    (image, est.relative_noise())
+    ImageReference {
+        image,
+        rays: est.rays,
+        noise: est.relative_noise().unwrap_or(f32::INFINITY),
+        seconds: 0.0,
+    }
 }
 
 /// Splits flat per-point estimates into per-object vectors.
@@ -396,6 +421,7 @@ pub fn split_per_object(frame: &FrameGeometry, est: &Estimates) -> VertexRadianc
     VertexRadiance {
         radiance: split(frame, &est.mean),
         std_error: est.std_error.as_ref().map(|se| split(frame, se)),
+        evaluated: None,
     }
 }
 
@@ -425,19 +451,51 @@ pub fn scene_references(
     progress: &ProgressBar,
 ) -> Result<(Vec<VertexReference>, bool)> {
     let eye = scene.camera().eye;
+    per_frame(scene, |frame| {
+        let compute = || vertex_reference(scene, frame, environment, eye, settings, progress);
+        match cache {
+            Some(cache) => {
+                let domain = Domain::Vertices { eye };
+                let key = cache_key(scene, frame, environment, domain, settings);
+                cache.vertex(&key, frame, compute)
+            }
+            None => Ok((compute()?, false)),
+        }
+    })
+}
+
+/// The image reference of every frame of `scene` under `environment`, seen
+/// through `camera`, cached as [`scene_references`].
+pub fn scene_image_references(
+    scene: &Scene,
+    environment: &Environment,
+    camera: &Camera,
+    settings: &ReferenceSettings,
+    cache: Option<&ReferenceCache>,
+    progress: &ProgressBar,
+) -> Result<(Vec<ImageReference>, bool)> {
+    per_frame(scene, |frame| {
+        let compute = || pixel_reference(scene, frame, environment, camera, settings, progress);
+        match cache {
+            Some(cache) => {
+                let domain = Domain::Pixels { camera };
+                let key = cache_key(scene, frame, environment, domain, settings);
+                cache.image(&key, (camera.width, camera.height), compute)
+            }
+            None => Ok((compute()?, false)),
+        }
+    })
+}
+
+/// `each` frame's result, and whether every one came from a cache.
+fn per_frame<R>(
+    scene: &Scene,
+    mut each: impl FnMut(&FrameGeometry) -> Result<(R, bool)>,
+) -> Result<(Vec<R>, bool)> {
     let mut all_cached = true;
     let mut out = Vec::with_capacity(scene.frames().len());
     for index in 0..scene.frames().len() {
-        let frame = scene.frame_geometry(index)?;
-        let compute = || vertex_reference(scene, &frame, environment, eye, settings, progress);
-        let (reference, cached) = match cache {
-            Some(cache) => cache.get_or_compute(
-                &cache_key(scene, &frame, environment, eye, settings),
-                &frame,
-                compute,
-            )?,
-            None => (compute()?, false),
-        };
+        let (reference, cached) = each(&scene.frame_geometry(index)?)?;
         all_cached &= cached;
         out.push(reference);
     }

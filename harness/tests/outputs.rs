@@ -1,0 +1,343 @@
+//! What the harness writes for other tools: exports that relight to the
+//! method's own radiance, images whose scores can be recomputed from the
+//! files, and clear refusals of bad requests that leave nothing behind.
+
+use std::{
+    collections::HashMap,
+    io::{Cursor, Read},
+    path::Path,
+    process::Command,
+};
+
+use glam::Vec3;
+use harness::{
+    export::{self, Provenance},
+    images, scenes,
+};
+use shadow_core::{
+    DirectionalVisibility, Environment, Export,
+    sh::{self, ShOrder},
+};
+
+/// One array of an `.npz`: its type descriptor, shape and raw data.
+struct Npy {
+    descr: String,
+    shape: Vec<usize>,
+    data: Vec<u8>,
+}
+
+impl Npy {
+    fn f32s(&self) -> Vec<f32> {
+        assert_eq!(self.descr, "<f4");
+        self.data
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect()
+    }
+
+    fn text(&self) -> String {
+        assert!(self.descr.starts_with("<U"), "{}", self.descr);
+        let chars = self.data.chunks_exact(4);
+        chars
+            .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+            .filter(|&c| c != 0)
+            .map(|c| char::from_u32(c).unwrap())
+            .collect()
+    }
+}
+
+/// Reads an `.npz` as numpy would: every `name.npy` member, its header
+/// parsed from the dictionary text.
+fn read_npz(path: &Path) -> HashMap<String, Npy> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut zip = zip::ZipArchive::new(Cursor::new(bytes)).unwrap();
+    let mut out = HashMap::new();
+    for i in 0..zip.len() {
+        let mut member = zip.by_index(i).unwrap();
+        let name = member
+            .name()
+            .unwrap()
+            .strip_suffix(".npy")
+            .unwrap()
+            .to_string();
+        let mut npy = Vec::new();
+        member.read_to_end(&mut npy).unwrap();
+        assert_eq!(&npy[..8], b"\x93NUMPY\x01\x00");
+        let header_len = u16::from_le_bytes([npy[8], npy[9]]) as usize;
+        let header = std::str::from_utf8(&npy[10..10 + header_len]).unwrap();
+        let field = |key: &str| {
+            let start = header.find(key).unwrap() + key.len();
+            header[start..].trim_start_matches([':', ' ', '\''])
+        };
+        let descr = field("'descr'").split('\'').next().unwrap().to_string();
+        let shape_text = field("'shape'");
+        let shape = shape_text[1..shape_text.find(')').unwrap()]
+            .split(',')
+            .filter_map(|d| d.trim().parse().ok())
+            .collect();
+        assert!(field("'fortran_order'").starts_with("False"));
+        out.insert(
+            name,
+            Npy {
+                descr,
+                shape,
+                data: npy[10 + header_len..].to_vec(),
+            },
+        );
+    }
+    out
+}
+
+/// A lat-long map with a bright patch: light that differs by direction.
+fn patchy_sky() -> Environment {
+    let (w, h) = (32, 16);
+    let texels = (0..w * h)
+        .map(|i| {
+            let (row, col) = (i / w, i % w);
+            let base = Vec3::new(0.3, 0.4, 0.6) * (1.0 - row as f32 / h as f32);
+            if (3..6).contains(&row) && (20..24).contains(&col) {
+                base + Vec3::new(20.0, 16.0, 9.0)
+            } else {
+                base
+            }
+        })
+        .collect();
+    Environment::new("patchy", w, h, texels).unwrap()
+}
+
+#[test]
+fn exported_transfer_relights_to_the_methods_own_radiance() {
+    let scene = scenes::builtin("wall").unwrap();
+    let frame = scene.frame_geometry(0).unwrap();
+    let mut method = harness::methods::by_name("hemi-raster").unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
+    method.update(&frame, scene.camera()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wall.npz");
+    let from = Provenance {
+        method: method.name(),
+        scene: &scene,
+        frame: &frame,
+    };
+    export::write_npz(&path, &method.export().unwrap(), from).unwrap();
+
+    // Relit from the file alone under a second environment...
+    let arrays = read_npz(&path);
+    let meta: serde_json::Value = serde_json::from_str(&arrays["meta"].text()).unwrap();
+    assert_eq!(meta["kind"], "sh_transfer");
+    let order = ShOrder::new(meta["sh"]["order"].as_u64().unwrap() as u32).unwrap();
+    let n = order.coeff_count();
+    let transfer = &arrays["transfer"];
+    assert_eq!(transfer.shape, vec![scene.vertex_count(), n]);
+    let offsets = &arrays["object_offsets"];
+    assert_eq!(offsets.shape, vec![scene.objects().len() + 1]);
+    let sky = patchy_sky();
+    let light = sh::project_environment(&sky, order);
+    let albedo = |o: usize| {
+        let a = &meta["materials"][o]["Lambert"]["albedo"];
+        Vec3::new(
+            a[0].as_f64().unwrap() as f32,
+            a[1].as_f64().unwrap() as f32,
+            a[2].as_f64().unwrap() as f32,
+        )
+    };
+    let coefficients = transfer.f32s();
+    let mut relit = Vec::new();
+    for (o, object) in frame.objects.iter().enumerate() {
+        let first: usize = frame.objects[..o].iter().map(|x| x.vertex_count()).sum();
+        for v in first..first + object.vertex_count() {
+            let e = light.dot(&coefficients[v * n..(v + 1) * n]);
+            relit.push((albedo(o) * std::f32::consts::FRAC_1_PI * e).max(Vec3::ZERO));
+        }
+    }
+    // ... is what the method shades after relighting: to rounding.
+    method.relight(&sky).unwrap();
+    let shaded: Vec<Vec3> = method.shade(scene.camera().eye).unwrap().flat().collect();
+    let scale = shaded.iter().map(|x| x.length()).fold(0.0, f32::max);
+    for (a, b) in relit.iter().zip(&shaded) {
+        assert!((*a - *b).length() <= 1e-5 * scale, "{a} against {b}");
+    }
+}
+
+#[test]
+fn exported_visibility_unpacks_as_documented() {
+    let scene = scenes::builtin("wall").unwrap();
+    let frame = scene.frame_geometry(0).unwrap();
+    let vertices = scene.vertex_count();
+    let k = 70; // two words per vertex, the last byte partly used
+    let directions: Vec<Vec3> = (0..k)
+        .map(|j| {
+            let z = 1.0 - 2.0 * (j as f32 + 0.5) / k as f32;
+            let phi = j as f32 * 2.399_963;
+            let r = (1.0 - z * z).sqrt();
+            Vec3::new(r * phi.cos(), z, r * phi.sin())
+        })
+        .collect();
+    let weights = vec![4.0 * std::f32::consts::PI / k as f32; k];
+    let normals: Vec<Vec3> = frame
+        .objects
+        .iter()
+        .flat_map(|o| o.normals().to_vec())
+        .collect();
+    let visible: Vec<u64> = (0..vertices * 2)
+        .map(|w| 0x9e37_79b9_7f4a_7c15u64.rotate_left(w as u32 % 64) ^ w as u64)
+        .collect();
+    let counts = frame.objects.iter().map(|o| o.vertex_count()).collect();
+    let vis = DirectionalVisibility::new(directions, weights, counts, normals, visible).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("vis.npz");
+    let from = Provenance {
+        method: "synthetic",
+        scene: &scene,
+        frame: &frame,
+    };
+    export::write_npz(&path, &Export::Visibility(vis.clone()), from).unwrap();
+
+    let arrays = read_npz(&path);
+    let packed = &arrays["visible"];
+    assert_eq!(
+        (packed.descr.as_str(), packed.shape.clone()),
+        ("|u1", vec![vertices, 9])
+    );
+    let d = arrays["directions"].f32s();
+    let w = arrays["weights"].f32s();
+    let n = arrays["normals"].f32s();
+    let radiance: Vec<Vec3> = (0..k)
+        .map(|j| Vec3::new(1.0, j as f32 * 0.1, 2.0))
+        .collect();
+    let expected = vis.irradiance(&radiance);
+    for i in 0..vertices {
+        let mut e = Vec3::ZERO;
+        for j in 0..k {
+            // numpy.unpackbits(..., bitorder="little")
+            let bit = packed.data[i * 9 + j / 8] >> (j % 8) & 1;
+            let cos =
+                n[3 * i] * d[3 * j] + n[3 * i + 1] * d[3 * j + 1] + n[3 * i + 2] * d[3 * j + 2];
+            e += radiance[j] * f32::from(bit) * w[j] * cos.max(0.0);
+        }
+        assert!(
+            (e - expected[i]).length() <= 1e-4 * expected[i].length().max(1.0),
+            "vertex {i}"
+        );
+    }
+}
+
+fn harness_command(args: &[&str], cache: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_harness"))
+        .args(args)
+        .arg("--cache")
+        .arg(cache)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn image_scores_agree_with_the_written_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let (report, pictures, cache) = (
+        dir.path().join("report"),
+        dir.path().join("img"),
+        dir.path().join("cache"),
+    );
+    let out = harness_command(
+        &[
+            "report",
+            "--scenes",
+            "wall",
+            "--repeats",
+            "1",
+            "--target",
+            "0.05",
+            "--image",
+            "40",
+            "--image-target",
+            "0.05",
+            "--dir",
+            report.to_str().unwrap(),
+            "--images",
+            pictures.to_str().unwrap(),
+        ],
+        &cache,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(report.join("report.json")).unwrap()).unwrap();
+    let reference = images::read_exr(&pictures.join("wall/reference.exr")).unwrap();
+    assert_eq!((reference.width, reference.height), (40, 30));
+    let runs = json["runs"].as_array().unwrap();
+    assert!(runs.len() >= 5);
+    for run in runs {
+        let method = run["method"].as_str().unwrap();
+        let image = images::read_exr(&pictures.join(format!("wall/{method}.exr"))).unwrap();
+        let (mut num, mut den) = (0.0f64, 0.0f64);
+        for i in 0..reference.pixels.len() {
+            if reference.covered[i] {
+                let x = if image.covered[i] {
+                    image.pixels[i]
+                } else {
+                    Vec3::ZERO
+                };
+                num += (x - reference.pixels[i]).length_squared() as f64;
+                den += reference.pixels[i].length_squared() as f64;
+            }
+        }
+        let recomputed = (num / den).sqrt();
+        let reported = run["frames"][0]["image"]["relative_l2"].as_f64().unwrap();
+        assert!(
+            (recomputed - reported).abs() <= 1e-5 * reported.max(1e-3),
+            "{method}: {recomputed} recomputed, {reported} reported"
+        );
+        assert!(pictures.join(format!("wall/{method}-error.png")).is_file());
+        assert!(image::open(pictures.join(format!("wall/{method}.png"))).is_ok());
+    }
+    let markdown = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(
+        markdown.contains("image error") && markdown.contains("40×30"),
+        "{markdown}"
+    );
+    assert!(report.join("speed-vs-error-image.png").is_file());
+}
+
+#[test]
+fn bad_requests_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", "--scene", "wall", "--target", "0.2", "--image", "8"];
+        args.extend_from_slice(extra);
+        harness_command(&args, &cache)
+    };
+    let refused = |out: &std::process::Output, needle: &str| {
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "accepted: {err}");
+        assert!(err.contains(needle) && !err.contains("panicked"), "{err}");
+    };
+
+    let out = run(&["--method", "unshadowed", "--image", "0"]);
+    refused(&out, "--image");
+
+    let missing = dir.path().join("no/such/folder/out.csv");
+    let out = run(&["--method", "unshadowed", "--out", missing.to_str().unwrap()]);
+    refused(&out, "does not exist");
+    assert!(!dir.path().join("no").exists());
+
+    let export = dir.path().join("unshadowed.npz");
+    let out = run(&[
+        "--method",
+        "unshadowed",
+        "--export",
+        export.to_str().unwrap(),
+    ]);
+    refused(&out, "nothing to export");
+    assert!(!export.exists());
+    // Refused before any reference was computed.
+    assert!(!cache.exists());
+
+    let out = run(&["--method", "raytrace:1"]);
+    refused(&out, "invalid configuration");
+}
