@@ -9,6 +9,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::{methods, scenes};
 
 fn frame_per_method(c: &mut Criterion) {
+    let gpu = methods::SharedGpu::new();
     for spec in scenes::SCENES
         .iter()
         .filter(|s| ["bunny", "human"].contains(&s.name))
@@ -22,7 +23,7 @@ fn frame_per_method(c: &mut Criterion) {
         let mut group = c.benchmark_group(format!("frame/{}", spec.name));
         group.sample_size(10);
         for name in methods::REPORT_METHODS {
-            let mut method = methods::by_name(name).expect("registered method");
+            let mut method = methods::by_name(name, &gpu).expect("registered method");
             method.prepare(&scene).expect("prepare");
             method.relight(&env).expect("relight");
             group.bench_function(BenchmarkId::from_parameter(name), |b| {

@@ -901,7 +901,8 @@ mod tests {
     use shadow_core::{Camera, Object};
 
     use super::*;
-    use crate::scenes::{shapes, white};
+    use crate::scenes::white;
+    use shadow_core::shapes;
 
     /// Objects sharing a mesh are pooled under its name, dark vertices are
     /// left out, and the worst 5% share is of the non-dark sum.

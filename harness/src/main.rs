@@ -357,7 +357,8 @@ fn main() -> Result<()> {
                 check_output(path)?;
             }
             let (scene, env) = input.load()?;
-            let mut m = methods::by_name(&method)?;
+            let gpu = methods::SharedGpu::new();
+            let mut m = methods::by_name(&method, &gpu)?;
             if export_path.is_some() && !m.capabilities().export {
                 bail!(
                     "{} has nothing to export (it does not support {})",
@@ -397,6 +398,9 @@ fn main() -> Result<()> {
                 camera.width,
                 camera.height
             );
+            if let Some(adapter) = gpu.adapter() {
+                println!("GPU adapter: {adapter}");
+            }
             println!(
                 "frame  vertex error  p99      max      image error  p99      max      update ms  shade ms  render ms  relight ms"
             );
@@ -475,6 +479,7 @@ fn main() -> Result<()> {
             if specs.is_empty() {
                 bail!("no built-in scene matches {chosen:?}");
             }
+            let gpu = methods::SharedGpu::new();
             let mut report = Report {
                 machine: MachineInfo::detect(None),
                 references: Vec::new(),
@@ -497,7 +502,7 @@ fn main() -> Result<()> {
                 };
                 let first_run = report.runs.len();
                 for name in methods::REPORT_METHODS {
-                    let mut m = methods::by_name(name)?;
+                    let mut m = methods::by_name(name, &gpu)?;
                     match run::run(m.as_mut(), &scene, &env, references, repeats) {
                         Ok(result) => {
                             eprintln!(
@@ -528,6 +533,7 @@ fn main() -> Result<()> {
                     images::write_scene(images_dir, scene.name(), &reference.image, &runs)?;
                 }
             }
+            report.machine.adapter = gpu.adapter();
             report.write(&dir)?;
             println!(
                 "wrote report.md, report.json and the speed-vs-error charts in {}",

@@ -1,8 +1,53 @@
-//! The methods the harness can run, by name.
+//! The methods the harness can run, by name, and the one GPU device the GPU
+//! methods of a run share.
 
-use shadow_core::{Error, Result, ShadowMethod, sh::ShOrder};
+use std::sync::{Arc, OnceLock};
+
+use occlusion_query::{Filtering, Level, OcclusionQuery, VertexTest};
+use shadow_core::{Error, Result, ShadowMethod, gpu::GpuContext, sh::ShOrder};
 
 use crate::baselines::{RayTrace, Unshadowed};
+
+/// The GPU context every GPU method of a run shares, opened when the first
+/// one is built (so that a run of CPU methods needs no adapter).
+#[derive(Debug, Default)]
+pub struct SharedGpu {
+    context: OnceLock<std::result::Result<Arc<GpuContext>, String>>,
+}
+
+impl SharedGpu {
+    /// A device opened on first use ([`GpuContext::new`]).
+    pub fn new() -> SharedGpu {
+        SharedGpu::default()
+    }
+
+    /// `context` for every GPU method (a test's, or a host's device).
+    pub fn with(context: Arc<GpuContext>) -> SharedGpu {
+        let shared = SharedGpu::default();
+        let _ = shared.context.set(Ok(context));
+        shared
+    }
+
+    /// The shared context, opening it on first use; a failure to open is
+    /// the same error for every later call.
+    pub fn get(&self) -> Result<Arc<GpuContext>> {
+        let opened = self.context.get_or_init(|| {
+            GpuContext::new().map(Arc::new).map_err(|e| match e {
+                Error::Gpu(message) => message,
+                other => other.to_string(),
+            })
+        });
+        opened.clone().map_err(Error::Gpu)
+    }
+
+    /// The adapter the shared device runs on, once a method opened it.
+    pub fn adapter(&self) -> Option<String> {
+        match self.context.get()? {
+            Ok(context) => Some(context.adapter.to_string()),
+            Err(_) => None,
+        }
+    }
+}
 
 /// Names accepted by [`by_name`], with what each is.
 pub const METHODS: &[(&str, &str)] = &[
@@ -23,6 +68,22 @@ pub const METHODS: &[(&str, &str)] = &[
         "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2): the same masks on those frames, from far fewer blockers",
     ),
     (
+        "occlusion-query",
+        "Sattler et al. 2004: GPU visibility of every vertex toward 258 lightsphere directions, by depth compare in a compute pass; options after ':' (e.g. occlusion-query:queries:k=66)",
+    ),
+    (
+        "occlusion-query:queries",
+        "the same with the paper's per-vertex occlusion queries (slow on a software rasterizer)",
+    ),
+    (
+        "occlusion-query:paper",
+        "the paper as published: queries, equal weights, the raw quadrature",
+    ),
+    (
+        "occlusion-query:k=N",
+        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified to a third)",
+    ),
+    (
         "raytrace:N",
         "Monte-Carlo ray tracing, N MIS iterations per vertex and per pixel (e.g. raytrace:16)",
     ),
@@ -38,14 +99,20 @@ pub const REPORT_METHODS: &[&str] = &[
     "hemi-raster",
     "hemi-raster:flat",
     "hemi-raster:pvs",
+    "occlusion-query",
+    "occlusion-query:simplified",
     "raytrace:4",
     "raytrace:16",
     "raytrace:64",
     "raytrace:64:vertex",
 ];
 
-/// Builds a method from its name.
-pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
+/// Builds a method from its name; GPU methods run on `gpu`'s device.
+pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
+    if let Some(options) = name.strip_prefix("occlusion-query") {
+        let config = occlusion_query_config(name, options)?;
+        return Ok(Box::new(OcclusionQuery::new(gpu.get()?, config)?));
+    }
     if name == "unshadowed" {
         let order = ShOrder::new(9).expect("9 is a valid SH order");
         return Ok(Box::new(Unshadowed::new(order)));
@@ -95,18 +162,77 @@ pub fn by_name(name: &str) -> Result<Box<dyn ShadowMethod>> {
     ))
 }
 
+/// The configuration `occlusion-query` followed by `options` (each after a
+/// ':') names.
+fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::Config> {
+    let mut config = occlusion_query::Config::default();
+    let bad = |what: String| Err(Error::config(name, what));
+    let mut options = options.split(':');
+    if options.next() != Some("") {
+        return bad("options follow the name after ':'".into());
+    }
+    for option in options {
+        match option.split_once('=') {
+            None if option == "queries" => config.test = VertexTest::OcclusionQuery,
+            None if option == "paper" => config = occlusion_query::Config::paper(),
+            None if option == "filter" => config.filtering = Some(Filtering { threshold: 0.05 }),
+            None if option == "simplified" => {
+                config.occluder = occlusion_query::Config::fast().occluder
+            }
+            Some(("k", k)) => match k.parse().ok().and_then(Level::with_directions) {
+                Some(level) => config.level = level,
+                None => {
+                    return bad(format!(
+                        "k={k}: the lightsphere has 6, 18, 66, 258, 1026 or 4098 directions"
+                    ));
+                }
+            },
+            Some(("map", n)) => match n.parse() {
+                Ok(n) => config.map_resolution = n,
+                Err(_) => return bad(format!("map={n}: not a whole number")),
+            },
+            _ => {
+                return bad(format!(
+                    "unknown option {option:?}; options are queries, paper, filter, simplified, k=N, map=N"
+                ));
+            }
+        }
+    }
+    Ok(config)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn every_listed_and_reported_method_builds() {
+        let Some(context) = shadow_core::gpu::test_context() else {
+            return;
+        };
+        let gpu = SharedGpu::with(context);
+        let by_name = |name: &str| super::by_name(name, &gpu);
         for name in REPORT_METHODS {
             assert!(by_name(name).is_ok(), "{name}");
         }
         for (name, _) in METHODS {
-            let name = name.replace(":N", ":8");
+            let name = name.replace("k=N", "k=66").replace(":N", ":8");
             assert!(by_name(&name).is_ok(), "{name}");
+        }
+        assert_eq!(
+            by_name("occlusion-query:queries:k=66:filter")
+                .unwrap()
+                .name(),
+            "occlusion-query-k66-queries-filtered"
+        );
+        for bad in [
+            "occlusion-query:k=100",
+            "occlusion-query:map=x",
+            "occlusion-query:fast",
+            "occlusion-queryx",
+        ] {
+            let err = by_name(bad).err().unwrap();
+            assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");
         }
         assert_eq!(
             by_name("hemi-raster:flat").unwrap().name(),

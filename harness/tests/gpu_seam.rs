@@ -4,6 +4,7 @@
 //! errors kept to the user that raised them, and the device checked for what
 //! a method needs.
 
+use shadow_core::shapes;
 use std::sync::{
     Arc,
     atomic::{AtomicBool, Ordering},
@@ -13,7 +14,6 @@ use glam::Vec3;
 use harness::{
     reference::{self, ReferenceSettings},
     run::{self, References},
-    scenes::shapes,
 };
 use indicatif::ProgressBar;
 use shadow_core::{

@@ -1,6 +1,7 @@
 //! The baselines through the `ShadowMethod` stages, and the per-pixel and
 //! glossy paths of the reference.
 
+use shadow_core::shapes;
 use std::sync::Arc;
 
 use glam::Vec3;
@@ -8,7 +9,7 @@ use harness::{
     baselines::{RayTrace, Unshadowed},
     reference::{self, ReferenceSettings, Setup, ShadingPoint},
     run::{self, References},
-    scenes::{self, shapes},
+    scenes,
 };
 use indicatif::ProgressBar;
 use shadow_core::{Brdf, Camera, Environment, Error, Object, Scene, ShadowMethod, sh::ShOrder};

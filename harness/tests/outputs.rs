@@ -109,7 +109,7 @@ fn patchy_sky() -> Environment {
 fn exported_transfer_relights_to_the_methods_own_radiance() {
     let scene = scenes::builtin("wall").unwrap();
     let frame = scene.frame_geometry(0).unwrap();
-    let mut method = harness::methods::by_name("hemi-raster").unwrap();
+    let mut method = harness::methods::by_name("hemi-raster", &Default::default()).unwrap();
     method.prepare(&scene).unwrap();
     method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
     method.update(&frame, scene.camera()).unwrap();

@@ -1,12 +1,13 @@
 //! The Monte-Carlo reference against cases whose answer is known exactly.
 
+use shadow_core::shapes;
 use std::sync::Arc;
 
 use glam::{Affine3A, Mat3, Vec3};
 use harness::{
     baselines::Unshadowed,
     reference::{self, ReferenceSettings, Setup, ShadingPoint},
-    scenes::{self, shapes},
+    scenes,
 };
 use indicatif::ProgressBar;
 use proptest::prelude::*;

@@ -1,6 +1,7 @@
 //! The transfer reference against cases whose answer is known, the transfer
 //! scores on hand-made vectors, and hemi-raster against the reference.
 
+use shadow_core::shapes;
 use std::{f32::consts::PI, sync::Arc};
 
 use approx::assert_relative_eq;
@@ -12,7 +13,6 @@ use harness::{
         transfer::{TransferSettings, scene_transfer_references, transfer_reference},
     },
     report::{MachineInfo, ReferenceInfo},
-    scenes::shapes,
 };
 use hemi_raster::HemiRaster;
 use indicatif::ProgressBar;

@@ -1,8 +1,17 @@
-//! # occlusion-query
-//!
-//! Sattler, Sarlette, Zachmann and Klein 2004, "Hardware-accelerated ambient
-//! occlusion computation": per-vertex visibility from k light directions by
-//! GPU depth tests (occlusion queries), on wgpu.
-//!
-//! Not implemented yet: this crate exists so the workspace has its final shape.
-//! It exports nothing until the method lands, so that nothing here pretends to work.
+#![doc = include_str!("../README.md")]
+
+mod config;
+mod filter;
+mod lightsphere;
+mod method;
+mod occluder;
+mod shading;
+mod uniforms;
+mod views;
+mod visibility;
+
+pub use config::{Config, DepthOffset, Filtering, Normalization, Occluder, VertexTest};
+pub use lightsphere::{Level, Lightsphere, Weights};
+pub use method::OcclusionQuery;
+pub use views::{Atlas, orthographic, texel};
+pub use visibility::QUERIES_PER_PASS;

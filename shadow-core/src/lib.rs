@@ -17,6 +17,7 @@ mod profile;
 pub mod raster;
 mod scene;
 pub mod sh;
+pub mod shapes;
 
 #[cfg(feature = "bvh")]
 pub mod bvh;

@@ -20,7 +20,9 @@ use std::sync::Arc;
 use glam::{Affine3A, Vec2, Vec3};
 use shadow_core::{Brdf, Frame, Mesh, Object, Pose, Result, Scene};
 
-use super::{framed, shapes, white};
+use shadow_core::shapes;
+
+use super::{framed, white};
 
 /// Side of a square, metres (a tournament board's 57 mm, rounded).
 const SQUARE: f32 = 0.06;

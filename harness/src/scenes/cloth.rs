@@ -16,7 +16,9 @@ use std::{f32::consts::TAU, sync::Arc};
 use glam::{Affine3A, Vec2, Vec3};
 use shadow_core::{Frame, Mesh, Object, Pose, Result, Scene};
 
-use super::{framed, shapes, white};
+use shadow_core::shapes;
+
+use super::{framed, white};
 
 /// Vertices along each side of the sheet: 37² sheet vertices and the floor's
 /// 3² make Table 1's 1378.

@@ -5,7 +5,6 @@
 
 mod chess;
 mod cloth;
-pub mod shapes;
 
 use std::{
     path::{Path, PathBuf},
@@ -14,7 +13,7 @@ use std::{
 
 use glam::{Affine3A, Vec3};
 use shadow_core::{
-    Aabb, Brdf, Camera, Environment, Error, Frame, Mesh, Object, Pose, Result, Scene,
+    Aabb, Brdf, Camera, Environment, Error, Frame, Mesh, Object, Pose, Result, Scene, shapes,
 };
 
 use crate::gltf::GltfAsset;

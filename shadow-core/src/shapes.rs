@@ -2,8 +2,8 @@
 
 use std::f32::consts::{PI, TAU};
 
+use crate::{Error, Mesh, Result};
 use glam::{Vec2, Vec3};
-use shadow_core::{Error, Mesh, Result};
 
 /// A UV sphere with outward normals (analytic, not area-weighted).
 pub fn uv_sphere(name: &str, center: Vec3, radius: f32, rings: u32, segments: u32) -> Result<Mesh> {

@@ -1,0 +1,188 @@
+//! The method's settings: plain values, validated by [`Config::check`].
+
+use shadow_core::{Error, Result};
+
+use crate::lightsphere::{Level, Weights};
+
+/// How each vertex is tested against a direction's depth map (§3.1–3.2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VertexTest {
+    /// A compute pass reads every vertex's depth-map texel and compares
+    /// (the paper's future work, §8.1): results stay on the GPU.
+    #[default]
+    DepthCompare,
+    /// The paper's test: every vertex drawn as a point with its own
+    /// occlusion query, 4096 queries per render pass; the sample counts are
+    /// resolved into a GPU buffer and turned into visibility bits there.
+    OcclusionQuery,
+}
+
+/// Whether each vertex's sum over directions is divided by its own
+/// quadrature of the cosine.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Normalization {
+    /// c_i is scaled by π / Σ_j w_j max(0, n_i·l_j), the quadrature's
+    /// integral of the clamped cosine: an unoccluded vertex under uniform
+    /// light gets exactly ρ at every level. At k = 6 a normal along an axis
+    /// sees one direction (the quadrature gives 4π/6 ≈ 2.09 for π), at k = 258
+    /// the quadrature is within about 1% everywhere; the scaling removes that
+    /// error, which would otherwise depend on the normal.
+    #[default]
+    PerVertex,
+    /// The raw quadrature Σ_j w_j M_ij I_j, as the paper sums it.
+    Off,
+}
+
+/// The depth offset between an occluder's depth map and the vertices tested
+/// against it (§3.2: the paper used `glPolygonOffset(1, 1)`).
+///
+/// WebGPU has no depth bias for point lists, and a float depth buffer's
+/// "units" are not a fixed depth step, so the offset is split: the slope
+/// term is the polygon offset's factor, applied as the depth-map pipeline's
+/// slope-scaled depth bias (depth per pixel of the occluder's slope, as in
+/// OpenGL); the constant term is a distance in map texels, by which each
+/// tested vertex is moved toward the light (the same in both tests).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthOffset {
+    /// Multiplies the occluder's depth slope per pixel.
+    pub slope: f32,
+    /// World distance toward the light, in texels of the depth map.
+    pub texels: f32,
+}
+
+/// Vertex filtering by temporal coherence (§4.1): only vertices of
+/// triangles the camera has seen get their visibility computed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Filtering {
+    /// Once fewer than this fraction of the triangles remain unseen, every
+    /// remaining one is evaluated and filtering stops (the paper's
+    /// threshold below which it no longer pays).
+    pub threshold: f32,
+}
+
+/// What is drawn into the depth maps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Occluder {
+    /// Every triangle of the frame.
+    Full,
+    /// Each object simplified by meshopt to about `ratio` of its triangles
+    /// (at least 64): the tested vertices stay at full resolution, only
+    /// the blockers are coarser.
+    Simplified { ratio: f32 },
+}
+
+/// The method's settings. Build from a preset ([`Config::default`],
+/// [`Config::paper`], [`Config::fast`]) and change fields.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// The lightsphere level while the geometry changes: 258 directions by
+    /// default, the paper's "reasonable" level 3 (§4.2).
+    pub level: Level,
+    /// While the geometry stays, refine one level per update up to this one,
+    /// reusing every coarser direction's result (§4.2); `None` keeps `level`.
+    pub idle_level: Option<Level>,
+    pub weights: Weights,
+    pub normalization: Normalization,
+    pub test: VertexTest,
+    /// Side of each direction's square depth map, in texels.
+    pub map_resolution: u32,
+    pub offset: DepthOffset,
+    pub filtering: Option<Filtering>,
+    pub occluder: Occluder,
+    /// The environment is blurred with a Gaussian of this many times the
+    /// lightsphere's spacing √(4π/k) before it is looked up in each
+    /// direction (§5).
+    pub prefilter: f32,
+}
+
+impl Default for Config {
+    /// Depth compare on the GPU at 258 directions with Voronoi weights and
+    /// per-vertex normalization, full occluders, 256² maps, no filtering.
+    fn default() -> Config {
+        Config {
+            level: Level::new(3).expect("level 3"),
+            idle_level: None,
+            weights: Weights::Voronoi,
+            normalization: Normalization::PerVertex,
+            test: VertexTest::DepthCompare,
+            map_resolution: 256,
+            offset: DepthOffset {
+                slope: 1.0,
+                texels: 1.0,
+            },
+            filtering: None,
+            occluder: Occluder::Full,
+            prefilter: 0.5,
+        }
+    }
+}
+
+impl Config {
+    /// The paper's method as published: occlusion queries, equal weights,
+    /// the raw quadrature, offset (1, 1), 258 directions.
+    pub fn paper() -> Config {
+        Config {
+            weights: Weights::Equal,
+            normalization: Normalization::Off,
+            test: VertexTest::OcclusionQuery,
+            offset: DepthOffset {
+                slope: 1.0,
+                texels: 1.0,
+            },
+            ..Config::default()
+        }
+    }
+
+    /// The default with occluders simplified to a third of their triangles.
+    pub fn fast() -> Config {
+        Config {
+            occluder: Occluder::Simplified { ratio: 1.0 / 3.0 },
+            ..Config::default()
+        }
+    }
+
+    /// The finest level the method can reach.
+    pub fn finest(&self) -> Level {
+        self.idle_level
+            .map_or(self.level, |idle| idle.max(self.level))
+    }
+
+    /// Fails with [`Error::InvalidConfig`] naming the first setting out of
+    /// range.
+    pub fn check(&self) -> Result<()> {
+        let bad = |what: String| Err(Error::config("occlusion-query", what));
+        if !(8..=4096).contains(&self.map_resolution) {
+            return bad(format!(
+                "depth map resolution {} is outside 8..=4096",
+                self.map_resolution
+            ));
+        }
+        let offset = self.offset;
+        let non_negative = |x: f32| x.is_finite() && x >= 0.0;
+        if !(non_negative(offset.slope) && non_negative(offset.texels)) {
+            return bad(format!(
+                "depth offset {offset:?} must be finite and non-negative"
+            ));
+        }
+        if let Some(f) = self.filtering
+            && !(0.0..=1.0).contains(&f.threshold)
+        {
+            return bad(format!(
+                "filtering threshold {} is outside [0, 1]",
+                f.threshold
+            ));
+        }
+        if let Occluder::Simplified { ratio } = self.occluder
+            && !(ratio > 0.0 && ratio <= 1.0)
+        {
+            return bad(format!("occluder ratio {ratio} is outside (0, 1]"));
+        }
+        if !non_negative(self.prefilter) {
+            return bad(format!(
+                "prefilter width {} must be finite and non-negative",
+                self.prefilter
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,128 @@
+//! The occluders drawn into the depth maps: every triangle, or each object
+//! simplified (model no more than visibility needs: the tested vertices stay
+//! at full resolution).
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+use meshopt::{SimplifyOptions, VertexDataAdapter};
+use shadow_core::{Error, Mesh, Result};
+
+/// Objects with fewer triangles than this are drawn whole.
+pub const MIN_TRIANGLES: usize = 64;
+
+/// About `ratio` of `mesh`'s triangles (at least [`MIN_TRIANGLES`]), as
+/// triangles over the mesh's own vertices: meshopt's edge-collapse
+/// simplification of the mesh welded by position (so that seams where
+/// vertices are split for normals can collapse too), mapped back to the
+/// first vertex at each position.
+pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Vec<[u32; 3]>> {
+    let triangles = mesh.triangles();
+    let target = ((triangles.len() as f32 * ratio).ceil() as usize).max(MIN_TRIANGLES);
+    if target >= triangles.len() {
+        return Ok(triangles.to_vec());
+    }
+    let positions = mesh.positions();
+    let mut first: HashMap<[u32; 3], u32> = HashMap::new();
+    let weld: Vec<u32> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            *first
+                .entry(p.to_array().map(f32::to_bits))
+                .or_insert(i as u32)
+        })
+        .collect();
+    let welded: Vec<u32> = triangles
+        .iter()
+        .flat_map(|t| t.map(|i| weld[i as usize]))
+        .collect();
+    let floats: Vec<f32> = positions.iter().flat_map(|p: &Vec3| p.to_array()).collect();
+    let adapter = VertexDataAdapter::new(meshopt::typed_to_bytes(&floats), 12, 0).map_err(|e| {
+        Error::InvalidMesh {
+            name: mesh.name().into(),
+            what: format!("meshopt refused the positions: {e}"),
+        }
+    })?;
+    // An error bound of the mesh's whole extent: the triangle count decides.
+    let indices = meshopt::simplify(
+        &welded,
+        &adapter,
+        3 * target,
+        1.0,
+        SimplifyOptions::None,
+        None,
+    );
+    let coarse: Vec<[u32; 3]> = indices
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    Ok(if coarse.is_empty() {
+        triangles.to_vec()
+    } else {
+        coarse
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 32×32 grid of quads, split along a seam (the vertices of column 16
+    /// repeated) as meshes with hard edges are.
+    fn seamed_grid() -> Mesh {
+        let n = 32;
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        for half in 0..2u32 {
+            let base = positions.len() as u32;
+            for j in 0..=n {
+                for i in 0..=n / 2 {
+                    let x = (half * n / 2 + i) as f32 / n as f32;
+                    let z = j as f32 / n as f32;
+                    positions.push(Vec3::new(x, 0.1 * (6.0 * x).sin() * z, z));
+                }
+            }
+            let row = n / 2 + 1;
+            for j in 0..n {
+                for i in 0..n / 2 {
+                    let a = base + j * row + i;
+                    triangles.push([a, a + row, a + 1]);
+                    triangles.push([a + 1, a + row, a + row + 1]);
+                }
+            }
+        }
+        Mesh::new("seamed", positions, None, triangles).unwrap()
+    }
+
+    #[test]
+    fn simplification_keeps_the_mesh_vertices_and_crosses_seams() {
+        let mesh = seamed_grid();
+        let coarse = simplified(&mesh, 0.1).unwrap();
+        let n = mesh.triangle_count();
+        assert!(
+            coarse.len() < n / 5 && coarse.len() >= MIN_TRIANGLES,
+            "{} of {n}",
+            coarse.len()
+        );
+        assert!(
+            coarse
+                .iter()
+                .flatten()
+                .all(|&v| (v as usize) < mesh.vertex_count())
+        );
+        // The covered area stays close to the original's.
+        let area = |tris: &[[u32; 3]]| -> f32 {
+            let p = mesh.positions();
+            tris.iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| p[i as usize]);
+                    0.5 * (b - a).cross(c - a).length()
+                })
+                .sum()
+        };
+        let (full, reduced) = (area(mesh.triangles()), area(&coarse));
+        assert!((reduced - full).abs() < 0.05 * full, "{reduced} of {full}");
+        assert_eq!(simplified(&mesh, 1.0).unwrap().len(), n);
+    }
+}

@@ -1,0 +1,71 @@
+// The depth-compare test (§8.1's future work): every listed vertex against
+// the depth maps of a batch of directions, one invocation per vertex, bits
+// set where the vertex passes (the occlusion query's LessEqual) and faces
+// the light.
+
+struct Direction {
+    clip_from_world: mat4x4<f32>,
+    light: vec4<f32>,
+}
+
+struct Batch {
+    // Listed vertices to test.
+    vertices: u32,
+    // Directions first .. first + count, whose maps sit in the atlas from
+    // slot 0 on, row by row.
+    first: u32,
+    count: u32,
+    // 32-bit words of visibility per vertex.
+    words: u32,
+    // Side of one map, and maps per atlas row.
+    map: u32,
+    grid: u32,
+    // World distance each tested vertex moves toward the light.
+    toward_light: f32,
+    _pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> batch: Batch;
+@group(0) @binding(1) var<storage, read> directions: array<Direction>;
+@group(0) @binding(2) var<storage, read> positions: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> normals: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> list: array<u32>;
+@group(0) @binding(5) var<storage, read_write> bits: array<u32>;
+@group(0) @binding(6) var atlas: texture_depth_2d;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= batch.vertices {
+        return;
+    }
+    let v = list[id.x];
+    let p = positions[v].xyz;
+    let n = normals[v].xyz;
+    let size = f32(batch.map);
+    let end = batch.first + batch.count;
+    var j = batch.first;
+    while j < end {
+        let w = v * batch.words + j / 32u;
+        var word = bits[w];
+        let stop = min(end, (j / 32u + 1u) * 32u);
+        while j < stop {
+            let d = directions[j];
+            let bit = 1u << (j % 32u);
+            word &= ~bit;
+            if dot(n, d.light.xyz) > 0.0 {
+                let c = d.clip_from_world * vec4<f32>(p + d.light.xyz * batch.toward_light, 1.0);
+                // The rasterizer's pixel of a point at c (row 0 at the top).
+                let x = clamp(floor((c.x * 0.5 + 0.5) * size), 0.0, size - 1.0);
+                let y = clamp(floor((0.5 - c.y * 0.5) * size), 0.0, size - 1.0);
+                let tile = j - batch.first;
+                let origin = vec2<u32>(tile % batch.grid, tile / batch.grid) * batch.map;
+                let texel = vec2<i32>(origin + vec2<u32>(u32(x), u32(y)));
+                if c.z <= textureLoad(atlas, texel, 0) {
+                    word |= bit;
+                }
+            }
+            j += 1u;
+        }
+        bits[w] = word;
+    }
+}

@@ -1,0 +1,573 @@
+//! The method on lavapipe (or a GPU): the white furnace, Lambert's form
+//! factor, the two vertex tests agreeing, nested levels reusing their work,
+//! a rigid object turning its lighting, vertex filtering along a camera path,
+//! recording into a caller's encoder, and bad input.
+
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+use glam::{Affine3A, Quat, Vec3};
+use occlusion_query::{
+    Config, Filtering, Level, Normalization, OcclusionQuery, VertexTest, Weights,
+};
+use shadow_core::gpu::{GpuContext, GpuStages, test_context};
+use shadow_core::{
+    Brdf, Camera, DirectionalVisibility, Environment, Error, Export, Frame, Mesh, Object, Pose,
+    Scene, ShadowMethod, Stage, raster, shapes,
+};
+
+fn lambert(rho: f32) -> Brdf {
+    Brdf::lambert(Vec3::splat(rho)).unwrap()
+}
+
+fn camera() -> Camera {
+    Camera::new(
+        Vec3::new(0.5, 2.5, 4.0),
+        Vec3::new(0.0, 0.3, 0.0),
+        Vec3::Y,
+        0.9,
+        64,
+        48,
+    )
+    .unwrap()
+}
+
+fn scene(meshes: Vec<Mesh>, rho: f32) -> Scene {
+    let objects = meshes
+        .into_iter()
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: lambert(rho),
+        })
+        .collect();
+    Scene::still("test", objects, camera()).unwrap()
+}
+
+fn level(s: u8) -> Level {
+    Level::new(s).unwrap()
+}
+
+/// The method through relight, update and shade on frame 0.
+fn shade(
+    ctx: &Arc<GpuContext>,
+    config: Config,
+    scene: &Scene,
+    env: &Environment,
+) -> (OcclusionQuery, Vec<Vec3>) {
+    let mut method = OcclusionQuery::new(Arc::clone(ctx), config).unwrap();
+    method.prepare(scene).unwrap();
+    method.relight(env).unwrap();
+    method
+        .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+        .unwrap();
+    let shaded = method.shade(scene.camera().eye).unwrap();
+    assert!(shaded.evaluated.is_none());
+    (method, shaded.flat().collect())
+}
+
+fn visibility(method: &OcclusionQuery) -> DirectionalVisibility {
+    match method.export().unwrap() {
+        Export::Visibility(v) => v,
+        other => panic!("exported {other:?}"),
+    }
+}
+
+/// A white sphere under a uniform unit sky returns ρ at every vertex with
+/// per-vertex normalization, at every level; the raw quadrature's error
+/// shrinks with the level.
+#[test]
+fn white_furnace_gives_the_albedo() {
+    let Some(ctx) = test_context() else { return };
+    let sphere = scene(
+        vec![shapes::uv_sphere("sphere", Vec3::ZERO, 1.0, 12, 24).unwrap()],
+        0.7,
+    );
+    let env = Environment::uniform(Vec3::ONE);
+    let mut raw_errors = Vec::new();
+    for s in 0..=4 {
+        for test in [VertexTest::DepthCompare, VertexTest::OcclusionQuery] {
+            let config = Config {
+                level: level(s),
+                test,
+                ..Config::default()
+            };
+            let (_, shaded) = shade(&ctx, config, &sphere, &env);
+            for x in &shaded {
+                assert!((x.x - 0.7).abs() < 1e-4, "level {s}, {test:?}: {x}");
+            }
+        }
+        let raw = Config {
+            level: level(s),
+            normalization: Normalization::Off,
+            ..Config::default()
+        };
+        let (_, shaded) = shade(&ctx, raw, &sphere, &env);
+        let worst = shaded
+            .iter()
+            .map(|x| (x.x - 0.7).abs() / 0.7)
+            .fold(0.0f32, f32::max);
+        raw_errors.push(worst);
+    }
+    println!("raw quadrature: worst relative error per level {raw_errors:?}");
+    assert!(raw_errors[0] > 0.2, "{raw_errors:?}");
+    assert!(
+        raw_errors[4] < 0.02 && raw_errors[4] < raw_errors[2],
+        "{raw_errors:?}"
+    );
+}
+
+/// The form factor of a polygon (counter-clockwise seen from `p`'s side)
+/// from a point with normal `n` (Lambert).
+fn polygon_form_factor(p: Vec3, n: Vec3, polygon: &[Vec3]) -> f32 {
+    let mut sum = 0.0;
+    for i in 0..polygon.len() {
+        let a = (polygon[i] - p).normalize();
+        let b = (polygon[(i + 1) % polygon.len()] - p).normalize();
+        let gamma = a.dot(b).clamp(-1.0, 1.0).acos();
+        let c = a.cross(b);
+        if c.length() > 0.0 {
+            sum += gamma * c.normalize().dot(n);
+        }
+    }
+    (sum / (2.0 * PI)).abs()
+}
+
+/// A floor beside a vertical wall under a uniform sky: each floor vertex
+/// gets ρ (1 − F), F the wall's form factor.
+#[test]
+fn a_wall_beside_a_floor_matches_lamberts_form_factor() {
+    let Some(ctx) = test_context() else { return };
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 16).unwrap();
+    let (origin, up, along) = (Vec3::new(0.5, 0.0, 1.0), Vec3::Y, Vec3::NEG_Z * 2.0);
+    let wall = shapes::grid("wall", origin, up / 4.0, along / 8.0, 4, 8).unwrap();
+    let corners = [origin, origin + along, origin + along + up, origin + up];
+    let scene = scene(vec![floor.clone(), wall], 1.0);
+    let env = Environment::uniform(Vec3::ONE);
+    let mut errors = Vec::new();
+    for s in 2..=4 {
+        let config = Config {
+            level: level(s),
+            map_resolution: 512,
+            ..Config::default()
+        };
+        let (_, shaded) = shade(&ctx, config, &scene, &env);
+        let (mut worst, mut sum, mut n) = (0.0f32, 0.0f32, 0);
+        for (p, x) in floor.positions().iter().zip(&shaded) {
+            // Both faces block; vertices on its foot are cut in two by it.
+            if (p.x - origin.x).abs() < 1e-3 {
+                continue;
+            }
+            let error = (x.x - (1.0 - polygon_form_factor(*p, Vec3::Y, &corners))).abs();
+            worst = worst.max(error);
+            sum += error;
+            n += 1;
+        }
+        errors.push((worst, sum / n as f32));
+    }
+    println!(
+        "worst and mean absolute error against the form factor, k = 66, 258, 1026: {errors:?}"
+    );
+    // The binary visibility of each direction's cell: the wall's outline
+    // cuts cells of about √(4π/k) across.
+    assert!(errors[1].0 < 0.05 && errors[1].1 < 0.01, "{errors:?}");
+    assert!(
+        errors[2].0 < errors[0].0 && errors[2].1 < errors[0].1,
+        "{errors:?}"
+    );
+}
+
+/// Two spheres and a floor, over 4096 vertices: the paper's queries (in two
+/// query sets' worth of passes) and the compute pass give the same bits up
+/// to points on a pixel's edge.
+#[test]
+fn queries_and_depth_compare_agree() {
+    let Some(ctx) = test_context() else { return };
+    let meshes = vec![
+        shapes::floor("floor", Vec3::ZERO, 2.0, 56).unwrap(),
+        shapes::uv_sphere("a", Vec3::new(-0.5, 0.5, 0.0), 0.5, 24, 48).unwrap(),
+        shapes::uv_sphere("b", Vec3::new(0.6, 0.3, 0.4), 0.3, 16, 32).unwrap(),
+    ];
+    let scene = scene(meshes, 0.8);
+    assert!(scene.vertex_count() > 4096);
+    let env = Environment::uniform(Vec3::ONE);
+    let config = Config {
+        level: level(2),
+        ..Config::default()
+    };
+    let (compare, _) = shade(&ctx, config, &scene, &env);
+    let queries_config = Config {
+        test: VertexTest::OcclusionQuery,
+        ..config
+    };
+    let (queries, _) = shade(&ctx, queries_config, &scene, &env);
+    let (a, b) = (visibility(&compare), visibility(&queries));
+    let mut differ = 0;
+    let mut visible = 0;
+    for i in 0..scene.vertex_count() {
+        for j in 0..a.directions.len() {
+            visible += a.is_visible(i, j) as usize;
+            differ += (a.is_visible(i, j) != b.is_visible(i, j)) as usize;
+        }
+    }
+    // Every pair that differs has its vertex on a texel's edge, where the
+    // rasterizer's rule for a point and the compute pass's floor() may part.
+    let size = config.map_resolution as f32;
+    let positions: Vec<Vec3> = scene
+        .frame_geometry(0)
+        .unwrap()
+        .objects
+        .iter()
+        .flat_map(|o| o.positions().to_vec())
+        .collect();
+    let mut farthest_from_an_edge = 0.0f32;
+    for (i, p) in positions.iter().enumerate() {
+        for j in 0..a.directions.len() {
+            if a.is_visible(i, j) != b.is_visible(i, j) {
+                let (view, toward) = compare.map_view(j).unwrap();
+                let c = view * (*p + a.directions[j] * toward).extend(1.0);
+                let x = (c.x * 0.5 + 0.5) * size;
+                let y = (0.5 - c.y * 0.5) * size;
+                let edge = (x - x.round()).abs().min((y - y.round()).abs());
+                farthest_from_an_edge = farthest_from_an_edge.max(edge);
+            }
+        }
+    }
+    println!(
+        "{differ} of {visible} visible pairs differ, each within {farthest_from_an_edge} texel of an edge"
+    );
+    assert!(visible > 10_000);
+    assert!(differ * 1000 <= visible, "{differ} of {visible}");
+    assert!(farthest_from_an_edge < 0.01, "{farthest_from_an_edge}");
+}
+
+/// From level 1 toward level 3 while the geometry stays: each update draws
+/// only the new directions' maps, and the result is bit for bit that of
+/// level 3 computed at once.
+#[test]
+fn idle_refinement_reuses_every_coarser_level() {
+    let Some(ctx) = test_context() else { return };
+    let meshes = vec![
+        shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
+        shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
+    ];
+    let scene = scene(meshes, 0.8);
+    let env = Environment::uniform(Vec3::ONE);
+    let frame = scene.frame_geometry(0).unwrap();
+    let config = Config {
+        level: level(1),
+        idle_level: Some(level(3)),
+        ..Config::default()
+    };
+    let mut method = OcclusionQuery::new(Arc::clone(&ctx), config).unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&env).unwrap();
+    let mut rendered = Vec::new();
+    for _ in 0..4 {
+        method.update(&frame, scene.camera()).unwrap();
+        rendered.push(
+            method
+                .profile()
+                .count_in(Stage::Update, "maps rendered")
+                .unwrap_or(0),
+        );
+    }
+    assert_eq!(rendered, [18, 48, 192, 0]);
+    assert_eq!(method.level(), Some(level(3)));
+    let direct = Config {
+        level: level(3),
+        ..Config::default()
+    };
+    let (at_once, _) = shade(&ctx, direct, &scene, &env);
+    assert_eq!(visibility(&method), visibility(&at_once));
+}
+
+/// A lat-long map lit from one side: the lighting has a direction.
+fn side_lit() -> Environment {
+    let (w, h) = (64, 32);
+    let texels = (0..w * h)
+        .map(|i| {
+            let phi = 2.0 * PI * ((i % w) as f32 + 0.5) / w as f32;
+            Vec3::splat(0.2 + phi.cos().max(0.0))
+        })
+        .collect();
+    Environment::new("side", w, h, texels).unwrap()
+}
+
+/// One object turning: the visibility of the first frame is kept (no maps
+/// drawn) and the lighting turns, close to computing the turned frame anew.
+#[test]
+fn a_rigid_object_turns_its_lighting_not_its_visibility() {
+    let Some(ctx) = test_context() else { return };
+    let torus_like = shapes::lathe(
+        "ring",
+        &[
+            glam::Vec2::new(0.0, -0.3),
+            glam::Vec2::new(0.5, -0.2),
+            glam::Vec2::new(0.6, 0.1),
+            glam::Vec2::new(0.2, 0.3),
+            glam::Vec2::new(0.0, 0.3),
+        ],
+        48,
+    )
+    .unwrap();
+    let turned =
+        Affine3A::from_rotation_translation(Quat::from_rotation_z(1.0), Vec3::new(0.2, 0.5, 0.0));
+    let frames = [Affine3A::IDENTITY, turned]
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| Frame {
+            time: i as f32,
+            poses: vec![Pose::Rigid(t)],
+        })
+        .collect();
+    let object = Object {
+        mesh: Arc::new(torus_like),
+        material: lambert(0.8),
+    };
+    let scene = Scene::new("ring", vec![object], frames, camera()).unwrap();
+    let env = side_lit();
+    let mut method = OcclusionQuery::new(Arc::clone(&ctx), Config::default()).unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&env).unwrap();
+    method
+        .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+        .unwrap();
+    let frame = scene.frame_geometry(1).unwrap();
+    method.update(&frame, scene.camera()).unwrap();
+    assert_eq!(
+        method.profile().count_in(Stage::Update, "maps rendered"),
+        Some(0)
+    );
+    let kept: Vec<Vec3> = method.shade(scene.camera().eye).unwrap().flat().collect();
+
+    // The same turned geometry as a still scene of its own, computed anew.
+    let posed = Mesh::new(
+        "ring",
+        frame.objects[0].positions().to_vec(),
+        Some(frame.objects[0].normals().to_vec()),
+        frame.objects[0].triangles().to_vec(),
+    )
+    .unwrap();
+    let still = Scene::still(
+        "turned",
+        vec![Object {
+            mesh: Arc::new(posed),
+            material: lambert(0.8),
+        }],
+        camera(),
+    )
+    .unwrap();
+    let (_, fresh) = shade(&ctx, Config::default(), &still, &env);
+    let num: f32 = kept
+        .iter()
+        .zip(&fresh)
+        .map(|(a, b)| (*a - *b).length_squared())
+        .sum();
+    let den: f32 = fresh.iter().map(|b| b.length_squared()).sum();
+    let relative = (num / den).sqrt();
+    println!("turned lighting against a fresh computation: {relative}");
+    assert!(relative < 0.02, "{relative}");
+}
+
+/// Along a camera path around a scene, with filtering on, every triangle
+/// the image shows has all three vertices evaluated (Fig. 4), and not
+/// every vertex was evaluated at the first frame.
+#[test]
+fn filtering_never_shows_an_unevaluated_vertex() {
+    let Some(ctx) = test_context() else { return };
+    let meshes = vec![
+        shapes::floor("floor", Vec3::ZERO, 2.0, 24).unwrap(),
+        shapes::uv_sphere("ball", Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32).unwrap(),
+        shapes::cuboid(
+            "box",
+            Vec3::new(0.8, 0.0, -0.9),
+            Vec3::new(1.4, 0.8, -0.3),
+            false,
+        )
+        .unwrap(),
+    ];
+    let scene = scene(meshes, 0.8);
+    let frame = scene.frame_geometry(0).unwrap();
+    let config = Config {
+        filtering: Some(Filtering { threshold: 0.05 }),
+        level: level(2),
+        ..Config::default()
+    };
+    let mut method = OcclusionQuery::new(Arc::clone(&ctx), config).unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
+    let mut first = None;
+    for step in 0..12 {
+        let angle = step as f32 * 0.45;
+        let eye = Vec3::new(
+            3.0 * angle.sin(),
+            1.2 + 0.1 * step as f32,
+            3.0 * angle.cos(),
+        );
+        let camera = Camera::new(eye, Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 0.8, 96, 72).unwrap();
+        method.update(&frame, &camera).unwrap();
+        let shaded = method.shade(camera.eye).unwrap();
+        let evaluated: Vec<bool> = shaded.flat_evaluated().collect();
+        first.get_or_insert(evaluated.iter().filter(|e| **e).count());
+        let offsets: Vec<usize> = frame
+            .objects
+            .iter()
+            .scan(0, |start, o| {
+                let s = *start;
+                *start += o.vertex_count();
+                Some(s)
+            })
+            .collect();
+        for hit in raster::visible_surface(&camera, &frame)
+            .unwrap()
+            .into_iter()
+            .flatten()
+        {
+            let o = hit.object as usize;
+            let tri = frame.objects[o].triangles()[hit.triangle as usize];
+            for v in tri {
+                assert!(
+                    evaluated[offsets[o] + v as usize],
+                    "step {step}: object {o} triangle {} shows vertex {v} unevaluated",
+                    hit.triangle
+                );
+            }
+        }
+    }
+    let first = first.unwrap();
+    assert!(
+        first < scene.vertex_count() * 3 / 4,
+        "{first} of {} evaluated at once",
+        scene.vertex_count()
+    );
+}
+
+/// The stages recorded into a caller's encoder and submitted once give what
+/// the blocking stages give.
+#[test]
+fn recording_into_a_callers_encoder_matches_the_stages() {
+    let Some(ctx) = test_context() else { return };
+    let meshes = vec![
+        shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
+        shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
+    ];
+    let scene = scene(meshes, 0.6);
+    let env = side_lit();
+    let (_, blocking) = shade(&ctx, Config::default(), &scene, &env);
+    let host = Arc::new(GpuContext::from_device(
+        ctx.device.clone(),
+        ctx.queue.clone(),
+    ));
+    let mut method = OcclusionQuery::new(Arc::clone(&host), Config::default()).unwrap();
+    method.prepare(&scene).unwrap();
+    let mut encoder = host.device.create_command_encoder(&Default::default());
+    method.record_relight(&env, &mut encoder).unwrap();
+    method
+        .record_update(
+            &scene.frame_geometry(0).unwrap(),
+            scene.camera(),
+            &mut encoder,
+        )
+        .unwrap();
+    let radiance = method
+        .record_shade(scene.camera().eye, &mut encoder)
+        .unwrap()
+        .clone();
+    assert!(method.record_render(scene.camera(), &mut encoder).is_err());
+    host.queue.submit([encoder.finish()]);
+    let recorded: Vec<[f32; 4]> = host.read_buffer(&radiance, 0, blocking.len()).unwrap();
+    for (r, b) in recorded.iter().zip(&blocking) {
+        assert_eq!(Vec3::new(r[0], r[1], r[2]), *b);
+    }
+    let filtered = Config {
+        filtering: Some(Filtering { threshold: 0.1 }),
+        ..Config::default()
+    };
+    let mut method = OcclusionQuery::new(host, filtered).unwrap();
+    method.prepare(&scene).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let err = method.record_update(
+        &scene.frame_geometry(0).unwrap(),
+        scene.camera(),
+        &mut encoder,
+    );
+    assert!(matches!(err, Err(Error::InvalidConfig { .. })));
+}
+
+#[test]
+fn bad_settings_and_stages_out_of_order_are_errors() {
+    let Some(ctx) = test_context() else { return };
+    for bad in [
+        Config {
+            map_resolution: 0,
+            ..Config::default()
+        },
+        Config {
+            map_resolution: 5000,
+            ..Config::default()
+        },
+        Config {
+            filtering: Some(Filtering { threshold: 2.0 }),
+            ..Config::default()
+        },
+        Config {
+            prefilter: f32::NAN,
+            ..Config::default()
+        },
+    ] {
+        let err = OcclusionQuery::new(Arc::clone(&ctx), bad).err().unwrap();
+        assert!(matches!(err, Error::InvalidConfig { .. }), "{err}");
+    }
+    let scene = scene(
+        vec![shapes::uv_sphere("s", Vec3::ZERO, 1.0, 4, 8).unwrap()],
+        0.5,
+    );
+    let mut method = OcclusionQuery::new(Arc::clone(&ctx), Config::default()).unwrap();
+    let frame = scene.frame_geometry(0).unwrap();
+    assert!(matches!(
+        method.update(&frame, scene.camera()),
+        Err(Error::Stage { .. })
+    ));
+    method.prepare(&scene).unwrap();
+    assert!(matches!(method.shade(Vec3::Z), Err(Error::Stage { .. })));
+    method.update(&frame, scene.camera()).unwrap();
+    assert!(matches!(method.shade(Vec3::Z), Err(Error::Stage { .. })));
+    method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
+    assert!(method.shade(Vec3::NAN).is_err());
+    method.shade(Vec3::Z).unwrap();
+    // A frame of another scene.
+    let other = scene_of_two();
+    let err = method
+        .update(&other.frame_geometry(0).unwrap(), other.camera())
+        .unwrap_err();
+    assert!(err.to_string().contains("vertex counts"), "{err}");
+}
+
+fn scene_of_two() -> Scene {
+    scene(
+        vec![
+            shapes::uv_sphere("s", Vec3::ZERO, 1.0, 4, 8).unwrap(),
+            shapes::floor("f", Vec3::ZERO, 1.0, 2).unwrap(),
+        ],
+        0.5,
+    )
+}
+
+/// Equal weights are the paper's 4π/k; Voronoi cells differ but sum alike.
+#[test]
+fn weights_are_selectable() {
+    let Some(ctx) = test_context() else { return };
+    let scene = scene(
+        vec![shapes::uv_sphere("s", Vec3::ZERO, 1.0, 6, 12).unwrap()],
+        0.5,
+    );
+    let env = Environment::uniform(Vec3::ONE);
+    let equal = Config {
+        weights: Weights::Equal,
+        level: level(1),
+        ..Config::default()
+    };
+    let (method, _) = shade(&ctx, equal, &scene, &env);
+    let v = visibility(&method);
+    assert!(v.weights.iter().all(|w| (w - 4.0 * PI / 18.0).abs() < 1e-6));
+}
