@@ -24,8 +24,11 @@
 //! summing to 4π; `visible`, uint8 (V, ⌈k/8⌉), bit j of vertex i set when
 //! direction j is visible from it, unpacked by
 //! `numpy.unpackbits(f["visible"], axis=1, count=k, bitorder="little")`.
-//! With `I` (k, 3) the radiance arriving from each direction,
-//! `E = (V · weights · max(0, normals @ directions.T)) @ I`.
+//! With `I` (k, 3) the radiance arriving from each direction (the
+//! environment blurred by a Gaussian of `meta["prefilter_radians"]`, looked
+//! up along it), `E = (V · weights · max(0, normals @ directions.T)) @ I`;
+//! when `meta["cosine_normalized"]`, each row is then scaled by
+//! π / Σ_j weights_j max(0, n·l_j), as the method shades.
 
 use std::{fmt::Write, path::Path};
 
@@ -184,6 +187,8 @@ pub fn write_npz(path: &Path, export: &Export, from: Provenance) -> Result<()> {
             let directions: Vec<f32> = v.directions.iter().flat_map(|d| d.to_array()).collect();
             meta["kind"] = "directional_visibility".into();
             meta["use"] = "E = (unpackbits(visible, axis=1, count=k, bitorder='little') * weights * max(0, normals @ directions.T)) @ I".into();
+            meta["cosine_normalized"] = v.cosine_normalized.into();
+            meta["prefilter_radians"] = v.prefilter.into();
             arrays.push(("directions", Array::f32(&[k, 3], &directions)));
             arrays.push(("weights", Array::f32(&[k], &v.weights)));
             arrays.push(("visible", Array::u8(&[vertices, bytes], &packed)));

@@ -3,7 +3,7 @@
 
 use std::sync::{Arc, OnceLock};
 
-use occlusion_query::{Filtering, Level, OcclusionQuery, VertexTest};
+use occlusion_query::{Filtering, Level, Occluder, OcclusionQuery, VertexTest};
 use shadow_core::{Error, Result, ShadowMethod, gpu::GpuContext, sh::ShOrder};
 
 use crate::baselines::{RayTrace, Unshadowed};
@@ -81,7 +81,7 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "occlusion-query:k=N",
-        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified to a third)",
+        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified to a third; simplified=RATIO for another share)",
     ),
     (
         "raytrace:N",
@@ -187,13 +187,17 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
                     ));
                 }
             },
+            Some(("simplified", r)) => match r.parse() {
+                Ok(ratio) => config.occluder = Occluder::Simplified { ratio },
+                Err(_) => return bad(format!("simplified={r}: not a number")),
+            },
             Some(("map", n)) => match n.parse() {
                 Ok(n) => config.map_resolution = n,
                 Err(_) => return bad(format!("map={n}: not a whole number")),
             },
             _ => {
                 return bad(format!(
-                    "unknown option {option:?}; options are queries, paper, filter, simplified, k=N, map=N"
+                    "unknown option {option:?}; options are queries, paper, filter, simplified, simplified=RATIO, k=N, map=N"
                 ));
             }
         }

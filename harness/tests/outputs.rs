@@ -223,6 +223,75 @@ fn exported_visibility_unpacks_as_documented() {
     }
 }
 
+/// occlusion-query's visibility, read back from the `.npz` alone and relit
+/// under a second environment as the module docs say, is what the method
+/// shades after relighting.
+#[test]
+fn exported_visibility_relights_to_the_methods_own_radiance() {
+    let Some(context) = shadow_core::gpu::test_context() else {
+        return;
+    };
+    let gpu = harness::methods::SharedGpu::with(context);
+    let scene = scenes::builtin("wall").unwrap();
+    let frame = scene.frame_geometry(0).unwrap();
+    let mut method = harness::methods::by_name("occlusion-query:k=66", &gpu).unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
+    method.update(&frame, scene.camera()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wall.npz");
+    let from = Provenance {
+        method: method.name(),
+        scene: &scene,
+        frame: &frame,
+    };
+    export::write_npz(&path, &method.export().unwrap(), from).unwrap();
+
+    let arrays = read_npz(&path);
+    let meta: serde_json::Value = serde_json::from_str(&arrays["meta"].text()).unwrap();
+    assert_eq!(meta["kind"], "directional_visibility");
+    let vec3s = |name: &str| -> Vec<Vec3> {
+        arrays[name]
+            .f32s()
+            .chunks_exact(3)
+            .map(Vec3::from_slice)
+            .collect()
+    };
+    let (directions, normals) = (vec3s("directions"), vec3s("normals"));
+    let weights = arrays["weights"].f32s();
+    let packed = &arrays["visible"];
+    let bytes = packed.shape[1];
+    let sky = patchy_sky().prefiltered(meta["prefilter_radians"].as_f64().unwrap() as f32);
+    let incoming: Vec<Vec3> = directions.iter().map(|&l| sky.lookup(l)).collect();
+    let normalized = meta["cosine_normalized"].as_bool().unwrap();
+    let albedo = 0.8; // scenes::white()
+    let relit: Vec<Vec3> = normals
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let (mut e, mut quadrature) = (Vec3::ZERO, 0.0);
+            for (j, l) in directions.iter().enumerate() {
+                let wc = weights[j] * n.dot(*l).max(0.0);
+                quadrature += wc;
+                if packed.data[i * bytes + j / 8] >> (j % 8) & 1 == 1 {
+                    e += incoming[j] * wc;
+                }
+            }
+            if normalized {
+                e *= std::f32::consts::PI / quadrature;
+            }
+            e * albedo / std::f32::consts::PI
+        })
+        .collect();
+
+    method.relight(&patchy_sky()).unwrap();
+    let shaded: Vec<Vec3> = method.shade(scene.camera().eye).unwrap().flat().collect();
+    let scale = shaded.iter().map(|x| x.length()).fold(0.0, f32::max);
+    for (a, b) in relit.iter().zip(&shaded) {
+        assert!((*a - *b).length() <= 1e-4 * scale, "{a} against {b}");
+    }
+}
+
 fn harness_command(args: &[&str], cache: &Path) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_harness"))
         .args(args)

@@ -36,18 +36,58 @@ pub enum Normalization {
 /// The depth offset between an occluder's depth map and the vertices tested
 /// against it (§3.2: the paper used `glPolygonOffset(1, 1)`).
 ///
-/// WebGPU has no depth bias for point lists, and a float depth buffer's
-/// "units" are not a fixed depth step, so the offset is split: the slope
-/// term is the polygon offset's factor, applied as the depth-map pipeline's
-/// slope-scaled depth bias (depth per pixel of the occluder's slope, as in
-/// OpenGL); the constant term is a distance in map texels, by which each
-/// tested vertex is moved toward the light (the same in both tests).
+/// Without one, a vertex is hidden by its own surface (acne): a map texel
+/// holds the depth at its centre, up to half a diagonal from the vertex
+/// along the surface, which is 0.71 texel × tan θ deeper or shallower along
+/// the light (θ between the surface normal and the light). WebGPU has no
+/// depth bias for point lists, and a float depth buffer's "units" are not a
+/// fixed step, so the offset is built from four terms, all in texels of the
+/// depth map:
+///
+/// * `occluder_slope`, the polygon offset's factor: the depth-map
+///   pipeline's slope-scaled bias, by the *occluder's* slope, at most
+///   `occluder_clamp` texels (0: unbounded, as in OpenGL). An occluder
+///   seen edge-on gets a large bias, so without a bound a vertex close
+///   under it sees through it.
+/// * `receiver_slope`: the tested vertex moves toward the light by this many
+///   texels times its own tan θ (tan θ at most [`DepthOffset::MAX_TAN`]):
+///   the factor, from the receiver's side, which is the surface that causes
+///   the acne.
+/// * `toward_light`, the polygon offset's units: a constant move toward
+///   the light.
+/// * `along_normal`: a move off the vertex's own surface along its normal,
+///   which keeps it out of that surface at 0.71 texel whatever the angle,
+///   but lifts it through any surface closer than that (a contact).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DepthOffset {
-    /// Multiplies the occluder's depth slope per pixel.
-    pub slope: f32,
-    /// World distance toward the light, in texels of the depth map.
-    pub texels: f32,
+    pub occluder_slope: f32,
+    pub occluder_clamp: f32,
+    pub receiver_slope: f32,
+    pub toward_light: f32,
+    pub along_normal: f32,
+}
+
+impl DepthOffset {
+    /// The paper's `glPolygonOffset(1, 1)`, as close as WebGPU allows.
+    pub const PAPER: DepthOffset = DepthOffset {
+        occluder_slope: 1.0,
+        occluder_clamp: 0.0,
+        receiver_slope: 0.0,
+        toward_light: 1.0,
+        along_normal: 0.0,
+    };
+
+    /// No offset at all.
+    pub const NONE: DepthOffset = DepthOffset {
+        occluder_slope: 0.0,
+        occluder_clamp: 0.0,
+        receiver_slope: 0.0,
+        toward_light: 0.0,
+        along_normal: 0.0,
+    };
+
+    /// The largest tan θ `receiver_slope` is multiplied by (θ ≈ 83°).
+    pub const MAX_TAN: f32 = 8.0;
 }
 
 /// Vertex filtering by temporal coherence (§4.1): only vertices of
@@ -91,7 +131,8 @@ pub struct Config {
     pub occluder: Occluder,
     /// The environment is blurred with a Gaussian of this many times the
     /// lightsphere's spacing √(4π/k) before it is looked up in each
-    /// direction (§5).
+    /// direction (§5). The default, 1/√(2π) ≈ 0.4, gives the Gaussian the
+    /// second moment of a disc the size of a direction's cell (4π/k).
     pub prefilter: f32,
 }
 
@@ -105,38 +146,37 @@ impl Default for Config {
             weights: Weights::Voronoi,
             normalization: Normalization::PerVertex,
             test: VertexTest::DepthCompare,
-            map_resolution: 256,
+            map_resolution: 512,
             offset: DepthOffset {
-                slope: 1.0,
-                texels: 1.0,
+                along_normal: 0.5,
+                ..DepthOffset::NONE
             },
             filtering: None,
             occluder: Occluder::Full,
-            prefilter: 0.5,
+            // 1/√(2π)
+            prefilter: 0.398_942_3,
         }
     }
 }
 
 impl Config {
     /// The paper's method as published: occlusion queries, equal weights,
-    /// the raw quadrature, offset (1, 1), 258 directions.
+    /// the raw quadrature, offset (1, 1) ([`DepthOffset::PAPER`]), 258
+    /// directions.
     pub fn paper() -> Config {
         Config {
             weights: Weights::Equal,
             normalization: Normalization::Off,
             test: VertexTest::OcclusionQuery,
-            offset: DepthOffset {
-                slope: 1.0,
-                texels: 1.0,
-            },
+            offset: DepthOffset::PAPER,
             ..Config::default()
         }
     }
 
-    /// The default with occluders simplified to a third of their triangles.
+    /// The default with occluders simplified to a tenth of their triangles.
     pub fn fast() -> Config {
         Config {
-            occluder: Occluder::Simplified { ratio: 1.0 / 3.0 },
+            occluder: Occluder::Simplified { ratio: 0.1 },
             ..Config::default()
         }
     }
@@ -159,7 +199,14 @@ impl Config {
         }
         let offset = self.offset;
         let non_negative = |x: f32| x.is_finite() && x >= 0.0;
-        if !(non_negative(offset.slope) && non_negative(offset.texels)) {
+        let terms = [
+            offset.occluder_slope,
+            offset.occluder_clamp,
+            offset.receiver_slope,
+            offset.toward_light,
+            offset.along_normal,
+        ];
+        if !terms.into_iter().all(non_negative) {
             return bad(format!(
                 "depth offset {offset:?} must be finite and non-negative"
             ));

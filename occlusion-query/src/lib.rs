@@ -14,4 +14,4 @@ pub use config::{Config, DepthOffset, Filtering, Normalization, Occluder, Vertex
 pub use lightsphere::{Level, Lightsphere, Weights};
 pub use method::OcclusionQuery;
 pub use views::{Atlas, orthographic, texel};
-pub use visibility::QUERIES_PER_PASS;
+pub use visibility::{QUERIES_PER_PASS, TestOffset};

@@ -12,13 +12,13 @@ use shadow_core::{
     FrameGeometry, Image, Mesh, Pose, Profile, Result, Scene, ShadowMethod, Stage, VertexRadiance,
 };
 
-use crate::config::{Config, Normalization, Occluder, VertexTest};
+use crate::config::{Config, DepthOffset, Normalization, Occluder, VertexTest};
 use crate::filter::{CameraFilter, vertices_of};
 use crate::lightsphere::{Level, Lightsphere};
 use crate::occluder;
 use crate::shading::Shading;
 use crate::views::{self, GpuDirection};
-use crate::visibility::{Counts, Geometry, Visibility};
+use crate::visibility::{Counts, Geometry, TestOffset, Visibility};
 
 /// Sattler, Sarlette, Zachmann and Klein 2004 on wgpu: per vertex, binary
 /// visibility toward the k directions of a lightsphere, from depth maps of
@@ -59,6 +59,10 @@ struct Prepared {
     /// The model-space mesh of a scene of one object moving rigidly (§6):
     /// uploaded once, its visibility turned with it.
     model: Option<Arc<Mesh>>,
+    /// How far the simplified occluders' surfaces may lie from the meshes'
+    /// (0 for full occluders): tested vertices move that much further along
+    /// their normals, out of the coarse surface.
+    simplification: f32,
     gpu: Gpu,
 }
 
@@ -79,7 +83,7 @@ struct State {
     positions: Vec<Vec4>,
     /// Every direction's map view, and the tested vertices' offset.
     views: Vec<GpuDirection>,
-    toward_light: f32,
+    offset: TestOffset,
     normals: Vec<Vec4>,
     /// The level every evaluated vertex has its visibility at.
     level: Level,
@@ -131,12 +135,12 @@ impl OcclusionQuery {
 
     /// Where direction `j`'s depth map looks from in the current frame:
     /// model space (world space unless the scene is one rigid object) to the
-    /// map's clip space, and the distance each tested vertex moves toward
-    /// the light. `None` before `update` or beyond the finest level.
-    pub fn map_view(&self, j: usize) -> Option<(Mat4, f32)> {
+    /// map's clip space, and how far each tested vertex moves before it is
+    /// compared. `None` before `update` or beyond the finest level.
+    pub fn map_view(&self, j: usize) -> Option<(Mat4, TestOffset)> {
         let state = self.state.as_ref()?;
         let view = state.views.get(j)?;
-        Some((view.clip_from_world, state.toward_light))
+        Some((view.clip_from_world, state.offset))
     }
 
     /// The lightsphere level the current visibility is at.
@@ -200,12 +204,15 @@ impl OcclusionQuery {
         let mut jobs = Vec::new();
         if changed {
             let (centre, radius) = bounding_sphere(&positions);
-            let (directions, toward_light) = fitted(&self.sphere, centre, radius, &self.config);
+            let (directions, offset) = fitted(
+                &self.sphere,
+                centre,
+                radius,
+                &self.config,
+                scene.simplification,
+            );
             scene.gpu.geometry.write(&ctx, &positions, &normals);
-            scene
-                .gpu
-                .visibility
-                .set_view(&ctx, &directions, toward_light);
+            scene.gpu.visibility.set_view(&ctx, &directions, offset);
             if let Some(filter) = &mut scene.gpu.filter {
                 filter.reset();
             }
@@ -216,7 +223,7 @@ impl OcclusionQuery {
                 positions,
                 normals,
                 views: directions,
-                toward_light,
+                offset,
                 level,
                 evaluated: vec![scene.gpu.filter.is_none(); vertices],
                 lit: None,
@@ -273,6 +280,13 @@ impl OcclusionQuery {
         Ok(jobs)
     }
 
+    /// The width of the Gaussian the environment is blurred with for
+    /// `level` (§5): `prefilter` times the level's spacing √(4π/k).
+    fn sigma(&self, level: Level) -> f32 {
+        let k = level.directions() as f32;
+        self.config.prefilter * (4.0 * std::f32::consts::PI / k).sqrt()
+    }
+
     /// Looks up the radiance arriving from each direction of the current
     /// level, turned by the rigid object's rotation, when either changed.
     fn light(&mut self) -> Result<()> {
@@ -287,7 +301,7 @@ impl OcclusionQuery {
         }
         let level = state.level;
         let start = Instant::now();
-        let sigma = self.config.prefilter * Lightsphere::new(level, self.config.weights).spacing();
+        let sigma = self.sigma(level);
         if !self.prefiltered.iter().any(|(l, _)| *l == level) {
             self.prefiltered.push((level, env.prefiltered(sigma)));
         }
@@ -406,12 +420,17 @@ impl OcclusionQuery {
         let mut occluders = Vec::new();
         let mut objects = Vec::new();
         let mut first = 0u32;
+        let mut simplification = 0.0f32;
         for (o, object) in scene.objects().iter().enumerate() {
             let mesh = &object.mesh;
             triangles.extend(mesh.triangles().iter().flatten().map(|&v| v + first));
             let drawn = match self.config.occluder {
                 Occluder::Full => mesh.triangles().to_vec(),
-                Occluder::Simplified { ratio } => occluder::simplified(mesh, ratio)?,
+                Occluder::Simplified { ratio } => {
+                    let simplified = occluder::simplified(mesh, ratio)?;
+                    simplification = simplification.max(simplified.error);
+                    simplified.triangles
+                }
             };
             let drawn = meshopt::optimize_vertex_cache(drawn.as_flattened(), mesh.vertex_count());
             occluders.extend(drawn.iter().map(|&v| v + first));
@@ -457,6 +476,7 @@ impl OcclusionQuery {
                 .collect(),
             triangles,
             model,
+            simplification,
             gpu,
         })
     }
@@ -506,22 +526,26 @@ fn bounding_sphere(positions: &[Vec4]) -> (Vec3, f32) {
 }
 
 /// Every direction's view of the sphere (`centre`, `radius`), grown so that
-/// the vertices moved toward the light by the constant offset stay inside
-/// the view volume (where the paper's queries are reliable), and that
-/// offset in world units.
+/// the tested vertices, once moved by their offsets, stay inside the view
+/// volume (where the paper's queries are reliable), and those offsets in
+/// world units; `simplification` adds to the move along the normal.
 fn fitted(
     sphere: &Lightsphere,
     centre: Vec3,
     radius: f32,
     config: &Config,
-) -> (Vec<GpuDirection>, f32) {
+    simplification: f32,
+) -> (Vec<GpuDirection>, TestOffset) {
     let inner = radius * 1.01;
     let texel = 2.0 * inner / config.map_resolution as f32;
-    let toward_light = config.offset.texels * texel;
-    (
-        views::directions(sphere, centre, inner + toward_light),
-        toward_light,
-    )
+    let offset = TestOffset {
+        toward_light: config.offset.toward_light * texel,
+        along_normal: config.offset.along_normal * texel + simplification,
+        slope: config.offset.receiver_slope * texel,
+        max_tan: DepthOffset::MAX_TAN,
+    };
+    let outer = inner + offset.toward_light + offset.slope * offset.max_tan + offset.along_normal;
+    (views::directions(sphere, centre, outer), offset)
 }
 
 impl ShadowMethod for OcclusionQuery {
@@ -670,13 +694,16 @@ impl ShadowMethod for OcclusionQuery {
             .iter()
             .flat_map(|o| o.normals().to_vec())
             .collect();
-        Ok(Export::Visibility(DirectionalVisibility::new(
+        let mut exported = DirectionalVisibility::new(
             directions,
             self.sphere.weights()[..k].to_vec(),
             scene.vertex_counts.clone(),
             normals,
             visible,
-        )?))
+        )?;
+        exported.cosine_normalized = self.config.normalization == Normalization::PerVertex;
+        exported.prefilter = self.sigma(state.level);
+        Ok(Export::Visibility(exported))
     }
 }
 

@@ -11,16 +11,29 @@ use shadow_core::{Error, Mesh, Result};
 /// Objects with fewer triangles than this are drawn whole.
 pub const MIN_TRIANGLES: usize = 64;
 
+/// A simplified occluder: its triangles, and how far its surface may lie
+/// from the mesh's.
+pub struct Simplified {
+    /// Triangles over the mesh's own vertices.
+    pub triangles: Vec<[u32; 3]>,
+    /// meshopt's bound on the distance between the two surfaces, in the
+    /// mesh's units.
+    pub error: f32,
+}
+
 /// About `ratio` of `mesh`'s triangles (at least [`MIN_TRIANGLES`]), as
 /// triangles over the mesh's own vertices: meshopt's edge-collapse
 /// simplification of the mesh welded by position (so that seams where
 /// vertices are split for normals can collapse too), mapped back to the
 /// first vertex at each position.
-pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Vec<[u32; 3]>> {
+pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Simplified> {
     let triangles = mesh.triangles();
     let target = ((triangles.len() as f32 * ratio).ceil() as usize).max(MIN_TRIANGLES);
     if target >= triangles.len() {
-        return Ok(triangles.to_vec());
+        return Ok(Simplified {
+            triangles: triangles.to_vec(),
+            error: 0.0,
+        });
     }
     let positions = mesh.positions();
     let mut first: HashMap<[u32; 3], u32> = HashMap::new();
@@ -45,22 +58,29 @@ pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Vec<[u32; 3]>> {
         }
     })?;
     // An error bound of the mesh's whole extent: the triangle count decides.
+    let mut error = 0.0;
     let indices = meshopt::simplify(
         &welded,
         &adapter,
         3 * target,
         1.0,
         SimplifyOptions::None,
-        None,
+        Some(&mut error),
     );
     let coarse: Vec<[u32; 3]> = indices
         .chunks_exact(3)
         .map(|c| [c[0], c[1], c[2]])
         .collect();
     Ok(if coarse.is_empty() {
-        triangles.to_vec()
+        Simplified {
+            triangles: triangles.to_vec(),
+            error: 0.0,
+        }
     } else {
-        coarse
+        Simplified {
+            triangles: coarse,
+            error: error * meshopt::simplify_scale(&adapter),
+        }
     })
 }
 
@@ -98,7 +118,9 @@ mod tests {
     #[test]
     fn simplification_keeps_the_mesh_vertices_and_crosses_seams() {
         let mesh = seamed_grid();
-        let coarse = simplified(&mesh, 0.1).unwrap();
+        let simplified_mesh = simplified(&mesh, 0.1).unwrap();
+        let coarse = simplified_mesh.triangles;
+        assert!(simplified_mesh.error > 0.0 && simplified_mesh.error < 0.05);
         let n = mesh.triangle_count();
         assert!(
             coarse.len() < n / 5 && coarse.len() >= MIN_TRIANGLES,
@@ -123,6 +145,6 @@ mod tests {
         };
         let (full, reduced) = (area(mesh.triangles()), area(&coarse));
         assert!((reduced - full).abs() < 0.05 * full, "{reduced} of {full}");
-        assert_eq!(simplified(&mesh, 1.0).unwrap().len(), n);
+        assert_eq!(simplified(&mesh, 1.0).unwrap().triangles.len(), n);
     }
 }

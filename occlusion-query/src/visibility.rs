@@ -8,7 +8,7 @@
 use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec4;
+use glam::{Vec3, Vec4};
 use shadow_core::{Error, Result, gpu::GpuContext};
 
 use crate::config::{Config, VertexTest};
@@ -30,8 +30,8 @@ struct BatchBlock {
     words: u32,
     map: u32,
     grid: u32,
-    toward_light: f32,
-    _pad: u32,
+    _pad: [u32; 2],
+    offset: TestOffset,
 }
 
 /// `Convert` in convert.wgsl.
@@ -65,13 +65,10 @@ impl Geometry {
         normals: &[Vec4],
         occluders: &[u32],
     ) -> Geometry {
-        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let usage =
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::VERTEX;
         Geometry {
-            positions: ctx.create_buffer_init(
-                "positions",
-                positions,
-                usage | wgpu::BufferUsages::VERTEX,
-            ),
+            positions: ctx.create_buffer_init("positions", positions, usage),
             normals: ctx.create_buffer_init("normals", normals, usage),
             occluders: ctx.create_buffer_init("occluders", occluders, wgpu::BufferUsages::INDEX),
             occluder_indices: occluders.len() as u32,
@@ -102,7 +99,7 @@ pub struct Visibility {
     compare_group: wgpu::BindGroup,
     convert_group: wgpu::BindGroup,
     directions: wgpu::Buffer,
-    offset: wgpu::Buffer,
+    offset_uniform: wgpu::Buffer,
     list: wgpu::Buffer,
     bits: wgpu::Buffer,
     samples: wgpu::Buffer,
@@ -114,7 +111,29 @@ pub struct Visibility {
     /// as last written.
     listed: Vec<u32>,
     lights: Vec<Vec4>,
-    toward_light: f32,
+    test_offset: TestOffset,
+}
+
+/// How far each tested vertex moves before it is compared with a map, in
+/// world units (see [`crate::DepthOffset`]): `toward_light` plus `slope`
+/// times tan θ (θ between its normal and the light, tan θ at most
+/// `max_tan`) toward the light, and `along_normal` along its normal.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TestOffset {
+    pub toward_light: f32,
+    pub along_normal: f32,
+    pub slope: f32,
+    pub max_tan: f32,
+}
+
+impl TestOffset {
+    /// Where a vertex at `p` with unit normal `n` is compared for light `l`.
+    pub fn moved(&self, p: Vec3, n: Vec3, l: Vec3) -> Vec3 {
+        let c = n.dot(l).max(1e-6);
+        let tan = ((1.0 - c * c).max(0.0).sqrt() / c).min(self.max_tan);
+        p + l * (self.toward_light + self.slope * tan) + n * self.along_normal
+    }
 }
 
 /// What one job of tests recorded.
@@ -198,7 +217,17 @@ impl Visibility {
             })
         };
         let draw_pipeline_layout = layout(&draw_layout);
+        let positions = wgpu::VertexBufferLayout {
+            array_stride: 16,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![0 => Float32x4],
+        };
+        let normals = wgpu::VertexBufferLayout {
+            attributes: &wgpu::vertex_attr_array![1 => Float32x4],
+            ..positions.clone()
+        };
         let render = |entry: &str, topology, write: bool, bias: wgpu::DepthBiasState| {
+            let with_normals = [Some(positions.clone()), Some(normals.clone())];
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(entry),
                 layout: Some(&draw_pipeline_layout),
@@ -206,11 +235,11 @@ impl Visibility {
                     module: &depth_shader,
                     entry_point: Some(entry),
                     compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: 16,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![0 => Float32x4],
-                    })],
+                    buffers: if write {
+                        &with_normals[..1]
+                    } else {
+                        &with_normals
+                    },
                 },
                 primitive: wgpu::PrimitiveState {
                     topology,
@@ -235,11 +264,13 @@ impl Visibility {
             })
         };
         // The polygon offset's factor (§3.2): slope-scaled bias on the
-        // occluders; its constant term moves the tested points instead.
+        // occluders; the tested points move instead of a constant term.
+        // A texel is 1/map of the map's depth range (the view volume is a
+        // cube around the bounding sphere), so the clamp is in texels too.
         let slope = wgpu::DepthBiasState {
             constant: 0,
-            slope_scale: config.offset.slope,
-            clamp: 0.0,
+            slope_scale: config.offset.occluder_slope,
+            clamp: config.offset.occluder_clamp / config.map_resolution as f32,
         };
         let occluder = render(
             "occluder",
@@ -398,7 +429,7 @@ impl Visibility {
             compare_group,
             convert_group,
             directions: directions_buffer,
-            offset,
+            offset_uniform: offset,
             list,
             bits,
             samples,
@@ -408,7 +439,7 @@ impl Visibility {
             words,
             listed: Vec::new(),
             lights: Vec::new(),
-            toward_light: 0.0,
+            test_offset: TestOffset::default(),
         })
     }
 
@@ -429,17 +460,14 @@ impl Visibility {
     }
 
     /// Sets where the maps look from (every direction) and how far tested
-    /// vertices move toward the light.
-    pub fn set_view(&mut self, ctx: &GpuContext, directions: &[GpuDirection], toward_light: f32) {
+    /// vertices move.
+    pub fn set_view(&mut self, ctx: &GpuContext, directions: &[GpuDirection], offset: TestOffset) {
         ctx.queue
             .write_buffer(&self.directions, 0, bytemuck::cast_slice(directions));
-        ctx.queue.write_buffer(
-            &self.offset,
-            0,
-            bytemuck::cast_slice(&[toward_light.to_bits(), self.atlas.grid, 0, 0]),
-        );
+        ctx.queue
+            .write_buffer(&self.offset_uniform, 0, bytemuck::bytes_of(&offset));
         self.lights = directions.iter().map(|d| d.light).collect();
-        self.toward_light = toward_light;
+        self.test_offset = offset;
     }
 
     /// Sets which vertices the next tests test (written before the next
@@ -544,8 +572,8 @@ impl Visibility {
                     words: self.words,
                     map: self.atlas.map,
                     grid: self.atlas.grid,
-                    toward_light: self.toward_light,
-                    _pad: 0,
+                    _pad: [0; 2],
+                    offset: self.test_offset,
                 };
                 let offset = self.batches.write(ctx, index, &block);
                 let mut pass = encoder.begin_compute_pass(&Default::default());
@@ -592,6 +620,7 @@ impl Visibility {
             pass.set_pipeline(&self.point);
             pass.set_bind_group(0, &self.draw_group, &[]);
             pass.set_vertex_buffer(0, geometry.positions.slice(..));
+            pass.set_vertex_buffer(1, geometry.normals.slice(..));
             for (query, &v) in part.iter().enumerate() {
                 pass.begin_occlusion_query(query as u32);
                 pass.draw(v..v + 1, j as u32..j as u32 + 1);

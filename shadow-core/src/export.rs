@@ -95,7 +95,11 @@ impl ShTransfer {
 /// solid angle (Sattler et al. 2004's visibility matrix with its cosines kept
 /// apart): `M_ij = n_i·l_j` where direction `j` is visible from vertex `i`,
 /// else 0, and a vertex's irradiance under radiance `I_j` arriving from
-/// direction `j` is `E_i = Σ_j w_j max(0, M_ij) I_j`.
+/// direction `j` is `E_i = Σ_j w_j max(0, M_ij) I_j`, times
+/// `π / Σ_j w_j max(0, n_i·l_j)` when `cosine_normalized` (then an
+/// unoccluded vertex under uniform light gets exactly π). `I_j` is the
+/// environment blurred with a Gaussian of `prefilter` radians (0: none),
+/// looked up at `l_j`, as the method that made it shades.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DirectionalVisibility {
     /// Unit world-space directions toward the light.
@@ -109,10 +113,16 @@ pub struct DirectionalVisibility {
     /// Bit `j % 64` of word `i · words + j / 64` is set when direction `j` is
     /// visible from vertex `i`, with `words = ceil(k / 64)`.
     pub visible: Vec<u64>,
+    /// Whether each vertex's sum is divided by its quadrature of the cosine.
+    pub cosine_normalized: bool,
+    /// The width (radians) of the Gaussian the environment is blurred with
+    /// before it is looked up along each direction.
+    pub prefilter: f32,
 }
 
 impl DirectionalVisibility {
-    /// Validates the sizes of every part against each other.
+    /// Validates the sizes of every part against each other; not
+    /// normalized, no prefilter.
     pub fn new(
         directions: Vec<Vec3>,
         weights: Vec<f32>,
@@ -141,6 +151,8 @@ impl DirectionalVisibility {
             vertex_counts,
             normals,
             visible,
+            cosine_normalized: false,
+            prefilter: 0.0,
         })
     }
 
@@ -161,10 +173,20 @@ impl DirectionalVisibility {
         (0..self.normals.len())
             .map(|i| {
                 let n = self.normals[i];
-                (0..self.directions.len())
+                let cosine = |j: usize| self.weights[j] * n.dot(self.directions[j]).max(0.0);
+                let sum: Vec3 = (0..self.directions.len())
                     .filter(|&j| self.is_visible(i, j))
-                    .map(|j| radiance[j] * self.weights[j] * n.dot(self.directions[j]).max(0.0))
-                    .sum()
+                    .map(|j| radiance[j] * cosine(j))
+                    .sum();
+                if !self.cosine_normalized {
+                    return sum;
+                }
+                let quadrature: f32 = (0..self.directions.len()).map(cosine).sum();
+                if quadrature > 0.0 {
+                    sum * (std::f32::consts::PI / quadrature)
+                } else {
+                    Vec3::ZERO
+                }
             })
             .collect()
     }
@@ -222,6 +244,9 @@ mod tests {
         assert!(vis.is_visible(0, 2) && vis.words_per_vertex() == 1);
         let e = vis.irradiance(&[Vec3::ONE; 6]);
         assert_relative_eq!(e[0].x, 4.0 * std::f32::consts::PI / 6.0, epsilon = 1e-6);
+        vis.cosine_normalized = true;
+        let e = vis.irradiance(&[Vec3::ONE; 6]);
+        assert_relative_eq!(e[0].x, std::f32::consts::PI, epsilon = 1e-5);
         vis.visible[0] = 0b111011; // +Y blocked
         assert_eq!(vis.irradiance(&[Vec3::ONE; 6])[0], Vec3::ZERO);
     }

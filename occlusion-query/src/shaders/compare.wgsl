@@ -20,9 +20,15 @@ struct Batch {
     // Side of one map, and maps per atlas row.
     map: u32,
     grid: u32,
-    // World distance each tested vertex moves toward the light.
+    _pad: vec2<u32>,
+    // World distances each tested vertex moves toward the light and along
+    // its normal.
     toward_light: f32,
-    _pad: u32,
+    along_normal: f32,
+    // World distance per unit of tan θ (θ between the vertex normal and
+    // the light) the vertex moves toward the light, at most `max_tan` of it.
+    slope: f32,
+    max_tan: f32,
 }
 
 @group(0) @binding(0) var<uniform> batch: Batch;
@@ -53,7 +59,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             let bit = 1u << (j % 32u);
             word &= ~bit;
             if dot(n, d.light.xyz) > 0.0 {
-                let c = d.clip_from_world * vec4<f32>(p + d.light.xyz * batch.toward_light, 1.0);
+                let cosine = dot(n, d.light.xyz);
+                let tan_theta = min(sqrt(max(1.0 - cosine * cosine, 0.0)) / cosine, batch.max_tan);
+                let toward = batch.toward_light + batch.slope * tan_theta;
+                let moved = p + d.light.xyz * toward + n * batch.along_normal;
+                let c = d.clip_from_world * vec4<f32>(moved, 1.0);
                 // The rasterizer's pixel of a point at c (row 0 at the top).
                 let x = clamp(floor((c.x * 0.5 + 0.5) * size), 0.0, size - 1.0);
                 let y = clamp(floor((0.5 - c.y * 0.5) * size), 0.0, size - 1.0);

@@ -9,8 +9,21 @@ struct Direction {
 }
 
 struct Offset {
-    // World distance each tested vertex moves toward the light.
+    // World distances each tested vertex moves toward the light and along
+    // its normal.
     toward_light: f32,
+    along_normal: f32,
+    // World distance per unit of tan θ (θ between the vertex normal and
+    // the light) the vertex moves toward the light, at most `max_tan` of it.
+    slope: f32,
+    max_tan: f32,
+}
+
+// Where a tested vertex at `p` with normal `n` is compared, for light `l`.
+fn moved(p: vec3<f32>, n: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
+    let c = max(dot(n, l), 1e-6);
+    let tan_theta = min(sqrt(max(1.0 - c * c, 0.0)) / c, offset.max_tan);
+    return p + l * (offset.toward_light + offset.slope * tan_theta) + n * offset.along_normal;
 }
 
 @group(0) @binding(0) var<storage, read> directions: array<Direction>;
@@ -26,9 +39,13 @@ fn occluder(@location(0) p: vec4<f32>, @builtin(instance_index) j: u32) -> Clip 
     return Clip(directions[j].clip_from_world * vec4<f32>(p.xyz, 1.0));
 }
 
-// A tested vertex: moved toward the light by the constant offset.
+// A tested vertex, moved by the offsets.
 @vertex
-fn point(@location(0) p: vec4<f32>, @builtin(instance_index) j: u32) -> Clip {
+fn point(
+    @location(0) p: vec4<f32>,
+    @location(1) n: vec4<f32>,
+    @builtin(instance_index) j: u32,
+) -> Clip {
     let d = directions[j];
-    return Clip(d.clip_from_world * vec4<f32>(p.xyz + d.light.xyz * offset.toward_light, 1.0));
+    return Clip(d.clip_from_world * vec4<f32>(moved(p.xyz, n.xyz, d.light.xyz), 1.0));
 }
