@@ -253,6 +253,7 @@ impl OcclusionQuery {
         let state = self.state.as_mut().expect("set above");
         if let (Some(filter), Some(filtering)) = (&mut scene.gpu.filter, self.config.filtering) {
             let model = Mat4::from(state.transform);
+            let start = Instant::now();
             let seen = filter.newly_seen(
                 &ctx,
                 &scene.gpu.geometry,
@@ -267,6 +268,11 @@ impl OcclusionQuery {
             for &v in &list {
                 state.evaluated[v as usize] = true;
             }
+            self.profile.seconds(
+                Stage::Update,
+                "camera queries",
+                start.elapsed().as_secs_f64(),
+            );
             self.profile
                 .count(Stage::Update, "triangles unseen", filter.remaining() as u64);
             if !list.is_empty() {
@@ -595,10 +601,14 @@ impl ShadowMethod for OcclusionQuery {
         self.profile.begin(Stage::Update);
         let start = Instant::now();
         let jobs = self.plan(frame, camera)?;
+        let camera_queries = self
+            .profile
+            .seconds_in(Stage::Update, "camera queries")
+            .unwrap_or(0.0);
         self.profile.seconds(
             Stage::Update,
             "planning and uploads",
-            start.elapsed().as_secs_f64(),
+            start.elapsed().as_secs_f64() - camera_queries,
         );
         self.run_jobs(jobs, None)?;
         self.light()

@@ -61,15 +61,19 @@ pub struct Atlas {
 }
 
 impl Atlas {
-    /// The atlas for up to `directions` maps of side `map`, at most
-    /// `max_side` texels wide (and at most 8192: a bigger atlas holds more of
-    /// a batch but costs memory without saving passes that matter).
+    /// The atlas for `directions` maps of side `map`, at most `max_side`
+    /// texels wide (and at most 8192: a bigger atlas holds more of a batch
+    /// but costs memory without saving passes that matter). When one atlas
+    /// cannot hold them all, the batches are made even, so that no pass
+    /// clears a whole atlas for a few maps.
     pub fn new(map: u32, directions: usize, max_side: u32) -> Atlas {
-        let wanted = (directions as f64).sqrt().ceil() as u32;
-        let fits = (max_side.min(8192) / map).max(1);
+        let fits = (max_side.min(8192) / map).max(1) as usize;
+        let batches = directions.div_ceil(fits * fits).max(1);
+        let per_batch = directions.div_ceil(batches);
+        let wanted = (per_batch as f64).sqrt().ceil() as usize;
         Atlas {
             map,
-            grid: wanted.clamp(1, fits),
+            grid: wanted.clamp(1, fits) as u32,
         }
     }
 
@@ -140,8 +144,11 @@ mod tests {
         let a = Atlas::new(256, 258, 16384);
         assert_eq!((a.grid, a.batch(), a.side()), (17, 289, 4352));
         assert_eq!(a.origin(18), (256, 256));
+        // 4098 maps in five even batches of at most 820, not 4 × 1024 + 2.
         let big = Atlas::new(256, 4098, 16384);
-        assert_eq!((big.grid, big.batch()), (32, 1024));
+        assert_eq!((big.grid, big.batch()), (29, 841));
+        let two = Atlas::new(512, 258, 16384);
+        assert_eq!((two.grid, two.batch()), (12, 144));
         assert_eq!(Atlas::new(4096, 6, 4096).grid, 1);
         assert_eq!(texel(Vec4::new(-1.0, 1.0, 0.5, 1.0), 8), (0, 0));
         assert_eq!(texel(Vec4::new(1.0, -1.0, 0.5, 1.0), 8), (7, 7));

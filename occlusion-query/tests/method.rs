@@ -110,7 +110,10 @@ fn white_furnace_gives_the_albedo() {
         };
         let (_, shaded) = shade(&ctx, default, &sphere, &env);
         for x in &shaded {
-            assert!((x.x - 0.7).abs() < 0.01 * 0.7, "level {s}, default offset: {x}");
+            assert!(
+                (x.x - 0.7).abs() < 0.01 * 0.7,
+                "level {s}, default offset: {x}"
+            );
         }
         let raw = Config {
             level: level(s),
