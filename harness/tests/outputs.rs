@@ -409,4 +409,17 @@ fn bad_requests_are_refused_before_any_work() {
 
     let out = run(&["--method", "raytrace:1"]);
     refused(&out, "invalid configuration");
+
+    // A GPU method where wgpu finds no adapter (only Metal allowed, on a
+    // machine without it): a clear error before any reference is computed.
+    if cfg!(not(target_os = "macos")) {
+        let out = Command::new(env!("CARGO_BIN_EXE_harness"))
+            .args(["run", "--scene", "wall", "--method", "occlusion-query", "--cache"])
+            .arg(&cache)
+            .env("WGPU_BACKEND", "metal")
+            .output()
+            .unwrap();
+        refused(&out, "no GPU adapter found");
+        assert!(!cache.exists());
+    }
 }

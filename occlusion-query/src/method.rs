@@ -14,7 +14,7 @@ use shadow_core::{
 
 use crate::config::{Config, DepthOffset, Normalization, Occluder, VertexTest};
 use crate::filter::{CameraFilter, vertices_of};
-use crate::lightsphere::{Level, Lightsphere};
+use crate::lightsphere::{Level, Lightsphere, Weights};
 use crate::occluder;
 use crate::shading::Shading;
 use crate::views::{self, GpuDirection};
@@ -106,15 +106,24 @@ impl OcclusionQuery {
     /// settings out of range.
     pub fn new(ctx: Arc<GpuContext>, config: Config) -> Result<OcclusionQuery> {
         config.check()?;
+        // The name says every choice that changes the result's kind, so
+        // that a report says which weights and which test it shows.
         let mut name = format!("{NAME}-k{}", config.level.directions());
-        if config.test == VertexTest::OcclusionQuery {
-            name.push_str("-queries");
-        }
-        if config.filtering.is_some() {
-            name.push_str("-filtered");
-        }
-        if matches!(config.occluder, Occluder::Simplified { .. }) {
-            name.push_str("-simplified");
+        let suffixes = [
+            (config.test == VertexTest::OcclusionQuery, "-queries"),
+            (config.weights == Weights::Equal, "-equal-weights"),
+            (config.normalization == Normalization::Off, "-raw"),
+            (config.filtering.is_some(), "-filtered"),
+            (config.idle_level.is_some(), "-refined"),
+            (
+                matches!(config.occluder, Occluder::Simplified { .. }),
+                "-simplified",
+            ),
+        ];
+        for (applies, suffix) in suffixes {
+            if applies {
+                name.push_str(suffix);
+            }
         }
         Ok(OcclusionQuery {
             name,
