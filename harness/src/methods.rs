@@ -81,7 +81,7 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "occlusion-query:k=N",
-        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified to a third; simplified=RATIO for another share)",
+        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified while their surface moves by at most a texel of the depth maps; simplified=TEXELS for another bound)",
     ),
     (
         "raytrace:N",
@@ -187,9 +187,9 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
                     ));
                 }
             },
-            Some(("simplified", r)) => match r.parse() {
-                Ok(ratio) => config.occluder = Occluder::Simplified { ratio },
-                Err(_) => return bad(format!("simplified={r}: not a number")),
+            Some(("simplified", t)) => match t.parse() {
+                Ok(texels) => config.occluder = Occluder::Simplified { texels },
+                Err(_) => return bad(format!("simplified={t}: not a number")),
             },
             Some(("map", n)) => match n.parse() {
                 Ok(n) => config.map_resolution = n,
@@ -197,7 +197,7 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
             },
             _ => {
                 return bad(format!(
-                    "unknown option {option:?}; options are queries, paper, filter, simplified, simplified=RATIO, k=N, map=N"
+                    "unknown option {option:?}; options are queries, paper, filter, simplified, simplified=TEXELS, k=N, map=N"
                 ));
             }
         }

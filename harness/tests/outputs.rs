@@ -414,7 +414,14 @@ fn bad_requests_are_refused_before_any_work() {
     // machine without it): a clear error before any reference is computed.
     if cfg!(not(target_os = "macos")) {
         let out = Command::new(env!("CARGO_BIN_EXE_harness"))
-            .args(["run", "--scene", "wall", "--method", "occlusion-query", "--cache"])
+            .args([
+                "run",
+                "--scene",
+                "wall",
+                "--method",
+                "occlusion-query",
+                "--cache",
+            ])
             .arg(&cache)
             .env("WGPU_BACKEND", "metal")
             .output()

@@ -105,10 +105,11 @@ pub struct Filtering {
 pub enum Occluder {
     /// Every triangle of the frame.
     Full,
-    /// Each object simplified by meshopt to about `ratio` of its triangles
-    /// (at least 64): the tested vertices stay at full resolution, only
-    /// the blockers are coarser.
-    Simplified { ratio: f32 },
+    /// Each object simplified by meshopt as far as its surface moves at
+    /// most `texels` texels of the depth maps (detail the maps cannot hold
+    /// anyway), to no fewer than 64 triangles: the tested vertices stay at
+    /// full resolution, only the blockers are coarser.
+    Simplified { texels: f32 },
 }
 
 /// The method's settings. Build from a preset ([`Config::default`],
@@ -173,10 +174,13 @@ impl Config {
         }
     }
 
-    /// The default with occluders simplified to a tenth of their triangles.
+    /// The default with occluders simplified as far as their surface moves
+    /// by at most half a texel of the depth maps: it pays on dense meshes
+    /// (the 35k-vertex bunny's 69k triangles become 9k), and costs accuracy
+    /// on coarse or deforming ones.
     pub fn fast() -> Config {
         Config {
-            occluder: Occluder::Simplified { ratio: 0.1 },
+            occluder: Occluder::Simplified { texels: 0.5 },
             ..Config::default()
         }
     }
@@ -219,10 +223,12 @@ impl Config {
                 f.threshold
             ));
         }
-        if let Occluder::Simplified { ratio } = self.occluder
-            && !(ratio > 0.0 && ratio <= 1.0)
+        if let Occluder::Simplified { texels } = self.occluder
+            && !(texels.is_finite() && texels > 0.0)
         {
-            return bad(format!("occluder ratio {ratio} is outside (0, 1]"));
+            return bad(format!(
+                "occluder simplification by {texels} texels must be positive"
+            ));
         }
         if !non_negative(self.prefilter) {
             return bad(format!(

@@ -434,6 +434,19 @@ impl OcclusionQuery {
         let mut triangles = Vec::new();
         let mut occluders = Vec::new();
         let mut objects = Vec::new();
+        // The depth maps' texel at the first frame, for how far simplified
+        // occluders may deviate.
+        let first_frame = scene.frame_geometry(0)?;
+        let meshes: Vec<&Mesh> = match &model {
+            Some(model) => vec![model],
+            None => first_frame.objects.iter().map(|o| &*o.mesh).collect(),
+        };
+        let points: Vec<Vec4> = meshes
+            .iter()
+            .flat_map(|m| m.positions())
+            .map(|p| p.extend(1.0))
+            .collect();
+        let texel = 2.0 * 1.01 * bounding_sphere(&points).1 / self.config.map_resolution as f32;
         let mut first = 0u32;
         let mut simplification = 0.0f32;
         for (o, object) in scene.objects().iter().enumerate() {
@@ -441,8 +454,8 @@ impl OcclusionQuery {
             triangles.extend(mesh.triangles().iter().flatten().map(|&v| v + first));
             let drawn = match self.config.occluder {
                 Occluder::Full => mesh.triangles().to_vec(),
-                Occluder::Simplified { ratio } => {
-                    let simplified = occluder::simplified(mesh, ratio)?;
+                Occluder::Simplified { texels } => {
+                    let simplified = occluder::simplified(mesh, texels * texel)?;
                     simplification = simplification.max(simplified.error);
                     simplified.triangles
                 }

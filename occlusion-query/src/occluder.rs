@@ -21,15 +21,15 @@ pub struct Simplified {
     pub error: f32,
 }
 
-/// About `ratio` of `mesh`'s triangles (at least [`MIN_TRIANGLES`]), as
+/// `mesh` simplified as far as its surface moves by at most `max_error`
+/// (in the mesh's units), to no fewer than [`MIN_TRIANGLES`] triangles, as
 /// triangles over the mesh's own vertices: meshopt's edge-collapse
 /// simplification of the mesh welded by position (so that seams where
 /// vertices are split for normals can collapse too), mapped back to the
 /// first vertex at each position.
-pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Simplified> {
+pub fn simplified(mesh: &Mesh, max_error: f32) -> Result<Simplified> {
     let triangles = mesh.triangles();
-    let target = ((triangles.len() as f32 * ratio).ceil() as usize).max(MIN_TRIANGLES);
-    if target >= triangles.len() {
+    if triangles.len() <= MIN_TRIANGLES {
         return Ok(Simplified {
             triangles: triangles.to_vec(),
             error: 0.0,
@@ -57,13 +57,14 @@ pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Simplified> {
             what: format!("meshopt refused the positions: {e}"),
         }
     })?;
-    // An error bound of the mesh's whole extent: the triangle count decides.
+    // meshopt's errors are relative to the mesh's extent.
+    let scale = meshopt::simplify_scale(&adapter);
     let mut error = 0.0;
     let indices = meshopt::simplify(
         &welded,
         &adapter,
-        3 * target,
-        1.0,
+        3 * MIN_TRIANGLES,
+        max_error / scale,
         SimplifyOptions::None,
         Some(&mut error),
     );
@@ -79,7 +80,7 @@ pub fn simplified(mesh: &Mesh, ratio: f32) -> Result<Simplified> {
     } else {
         Simplified {
             triangles: coarse,
-            error: error * meshopt::simplify_scale(&adapter),
+            error: error * scale,
         }
     })
 }
@@ -118,9 +119,9 @@ mod tests {
     #[test]
     fn simplification_keeps_the_mesh_vertices_and_crosses_seams() {
         let mesh = seamed_grid();
-        let simplified_mesh = simplified(&mesh, 0.1).unwrap();
+        let simplified_mesh = simplified(&mesh, 0.01).unwrap();
         let coarse = simplified_mesh.triangles;
-        assert!(simplified_mesh.error > 0.0 && simplified_mesh.error < 0.05);
+        assert!(simplified_mesh.error > 0.0 && simplified_mesh.error <= 0.01);
         let n = mesh.triangle_count();
         assert!(
             coarse.len() < n / 5 && coarse.len() >= MIN_TRIANGLES,
@@ -145,6 +146,9 @@ mod tests {
         };
         let (full, reduced) = (area(mesh.triangles()), area(&coarse));
         assert!((reduced - full).abs() < 0.05 * full, "{reduced} of {full}");
-        assert_eq!(simplified(&mesh, 1.0).unwrap().triangles.len(), n);
+        // With no error allowed, only collapses that move nothing happen.
+        let exact = simplified(&mesh, 0.0).unwrap();
+        assert!((area(&exact.triangles) - full).abs() < 1e-4 * full);
+        assert_eq!(exact.error, 0.0);
     }
 }
