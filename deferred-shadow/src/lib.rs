@@ -1,9 +1,16 @@
-//! # deferred-shadow
-//!
-//! Tamura, Johan and Nishita, "Deferred shadowing for real-time rendering of
-//! dynamic scenes under environment illumination": per-vertex PRT for
-//! self-shadowing plus per-pixel shadows from other objects through occlusion
-//! maps, on wgpu.
-//!
-//! Not implemented yet: this crate exists so the workspace has its final shape.
-//! It exports nothing until the method lands, so that nothing here pretends to work.
+#![doc = include_str!("../README.md")]
+
+mod config;
+mod gpu;
+mod groups;
+mod lights;
+mod maps;
+mod method;
+mod transfer;
+
+pub use config::{Config, Grouping, MAX_LIGHTS, MAX_MAP_RESOLUTION};
+pub use groups::Groups;
+pub use lights::{AreaLight, decompose};
+pub use maps::{MapWindow, Plan};
+pub use method::DeferredShadow;
+pub use transfer::{DIFFUSE_ORDER, GLOSSY_ORDER, Lighting, Transfer};

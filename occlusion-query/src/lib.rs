@@ -6,7 +6,6 @@ mod lightsphere;
 mod method;
 mod occluder;
 mod shading;
-mod uniforms;
 mod views;
 mod visibility;
 

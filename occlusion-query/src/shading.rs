@@ -6,8 +6,8 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Vec3, Vec4};
 use shadow_core::{Brdf, gpu::GpuContext};
 
-use crate::uniforms::storage;
 use crate::visibility::{Geometry, Visibility};
+use shadow_core::gpu::uniforms::storage;
 
 /// `Shade` in shade.wgsl.
 #[repr(C)]

@@ -12,8 +12,8 @@ use glam::{Vec3, Vec4};
 use shadow_core::{Error, Result, gpu::GpuContext};
 
 use crate::config::{Config, VertexTest};
-use crate::uniforms::{Slots, dynamic_uniform, storage};
 use crate::views::{Atlas, GpuDirection};
+use shadow_core::gpu::uniforms::{Slots, dynamic_uniform, storage};
 
 /// Occlusion queries a query set (and so a render pass) holds at most.
 pub const QUERIES_PER_PASS: usize = wgpu::QUERY_SET_MAX_QUERIES as usize;
@@ -553,7 +553,7 @@ impl Visibility {
         index: usize,
     ) -> Result<Counts> {
         let vertices = self.listed.len();
-        if index >= self.batches.len() {
+        if index >= self.batches.capacity() {
             return Err(Error::stage(
                 "occlusion-query",
                 "more batches than the lightsphere holds",

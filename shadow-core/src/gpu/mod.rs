@@ -29,6 +29,7 @@
 
 mod readback;
 mod stages;
+pub mod uniforms;
 
 use std::fmt;
 use std::sync::{Arc, Mutex};

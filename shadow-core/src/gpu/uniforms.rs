@@ -1,3 +1,5 @@
+//! Uniform blocks and bind group layout entries shared by the GPU methods.
+//!
 //! Uniform blocks written once per recorded dispatch or draw: slots 256
 //! bytes apart in one buffer, bound with a dynamic offset, so that several
 //! dispatches recorded into one encoder each read their own values (a
@@ -6,8 +8,8 @@
 use std::marker::PhantomData;
 use std::num::NonZeroU64;
 
+use super::GpuContext;
 use bytemuck::Pod;
-use shadow_core::gpu::GpuContext;
 
 /// A buffer of `slots` uniform blocks of type `T`.
 pub struct Slots<T> {
@@ -37,7 +39,8 @@ impl<T: Pod> Slots<T> {
         }
     }
 
-    pub fn len(&self) -> usize {
+    /// How many slots the buffer holds (at least one).
+    pub fn capacity(&self) -> usize {
         self.slots
     }
 
@@ -87,6 +90,20 @@ pub fn storage(
         visibility,
         ty: wgpu::BindingType::Buffer {
             ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// The layout entry of a uniform block bound without an offset.
+pub fn uniform(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
             has_dynamic_offset: false,
             min_binding_size: None,
         },

@@ -1,0 +1,89 @@
+//! The method's settings.
+
+use shadow_core::{Error, Result};
+
+/// How occluders are gathered into groups, each casting through one
+/// occlusion map per light and receiver (§4.2.3). Shadows cast within a
+/// group are lost: its members do not shadow each other except through
+/// their own self-shadowing.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Grouping {
+    /// Objects whose bounding boxes (padded by a thousandth of the scene's
+    /// diagonal, so that flat objects have a volume) overlap by more than
+    /// `overlap` of the smaller box's volume form one group: the two colours
+    /// of a chess board, or parts of one figure, but not a piece standing
+    /// on the board.
+    Overlapping { overlap: f32 },
+    /// The given groups of object indices; each object in exactly one.
+    Explicit(Vec<Vec<usize>>),
+}
+
+/// The method's settings. [`Config::default`] is the paper's real-time
+/// choice (§7.2): 32 area lights and 64² occlusion maps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    /// q, the number of area lights the environment is split into (§4.2.1).
+    pub lights: usize,
+    /// Side of each square occlusion map, texels (§4.2.2; the paper: 32, 64,
+    /// 128).
+    pub map_resolution: u32,
+    /// Shadow rays per vertex for the self-transfer precomputation
+    /// (cosine-distributed, stratified).
+    pub rays: u32,
+    pub grouping: Grouping,
+    /// Multiply the occlusion ratio by the point's own visibility toward
+    /// each light (eq. 7–8, §4.2.4), so that a direction both self- and
+    /// other-occluded is not subtracted twice. Off gives eq. 4.
+    pub self_visibility: bool,
+}
+
+impl Default for Config {
+    fn default() -> Config {
+        Config {
+            lights: 32,
+            map_resolution: 64,
+            rays: 512,
+            grouping: Grouping::Overlapping { overlap: 0.5 },
+            self_visibility: true,
+        }
+    }
+}
+
+/// The most area lights: the deferred pass keeps one weight per light and
+/// vertex.
+pub const MAX_LIGHTS: usize = 256;
+
+/// The largest occlusion map side (the blur keeps a row in registers).
+pub const MAX_MAP_RESOLUTION: u32 = 256;
+
+impl Config {
+    /// Fails with [`shadow_core::Error::InvalidConfig`] naming the first
+    /// setting out of range.
+    pub fn check(&self) -> Result<()> {
+        let bad = |what: String| Err(Error::config("deferred-shadow", what));
+        if !(1..=MAX_LIGHTS).contains(&self.lights) {
+            return bad(format!(
+                "{} area lights is outside 1..={MAX_LIGHTS}",
+                self.lights
+            ));
+        }
+        if !(4..=MAX_MAP_RESOLUTION).contains(&self.map_resolution) {
+            return bad(format!(
+                "occlusion map resolution {} is outside 4..={MAX_MAP_RESOLUTION}",
+                self.map_resolution
+            ));
+        }
+        if !(16..=65536).contains(&self.rays) {
+            return bad(format!(
+                "{} rays per vertex is outside 16..=65536",
+                self.rays
+            ));
+        }
+        if let Grouping::Overlapping { overlap } = self.grouping
+            && !(overlap > 0.0 && overlap <= 1.0)
+        {
+            return bad(format!("group overlap {overlap} is outside (0, 1]"));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,856 @@
+//! The method's GPU side: the scene's vertices and triangles, the occlusion
+//! maps (rendered into an atlas batch by batch and blurred into one array),
+//! the visible-surface pass and the deferred pass, per pixel and per vertex.
+//!
+//! Vertices are pulled from storage buffers in every shader (no vertex
+//! buffers): a triangle's corners are `triangles[t]` (x, y, z, its object in
+//! w), model-space positions carry their object's index in w, and each
+//! object's pose is a matrix of `objects`. Moving an object rewrites one
+//! matrix; nothing else is uploaded.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, Vec3, Vec4};
+use shadow_core::{
+    Brdf, Camera,
+    gpu::{
+        GpuContext,
+        uniforms::{Slots, dynamic_uniform, storage, uniform},
+    },
+    raster::clip_from_world,
+};
+
+use crate::config::MAX_LIGHTS;
+use crate::maps::{GpuLight, Plan};
+
+/// `Object` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GpuObject {
+    pub model: Mat4,
+    pub normal: Mat4,
+    pub diffuse: Vec4,
+    pub specular: Vec4,
+}
+
+impl GpuObject {
+    pub fn new(model: Mat4, material: &Brdf) -> GpuObject {
+        let (diffuse, specular) = match *material {
+            Brdf::Lambert { albedo } => (albedo.extend(0.0), Vec4::ZERO),
+            Brdf::Phong {
+                diffuse,
+                specular,
+                exponent,
+            } => (diffuse.extend(0.0), specular.extend(exponent)),
+        };
+        let normal = Mat4::from_mat3(glam::Mat3::from_mat4(model).inverse().transpose());
+        GpuObject {
+            model,
+            normal,
+            diffuse,
+            specular,
+        }
+    }
+}
+
+/// `Atlas` in maps.wgsl: one batch of maps in the atlas.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct AtlasBlock {
+    resolution: u32,
+    per_row: u32,
+    side: f32,
+    first: u32,
+}
+
+/// `Params` in deferred.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct Params {
+    eye: Vec4,
+    lights: u32,
+    resolution: u32,
+    self_visibility: u32,
+    vertices: u32,
+    width: u32,
+    height: u32,
+    stride: u32,
+    pad: u32,
+}
+
+/// The scene's static data, in model space.
+pub struct Geometry {
+    /// Model-space position (w: the object's index as a float) and normal
+    /// of every vertex.
+    pub vertices: Vec<[Vec4; 2]>,
+    /// Global vertex indices of each triangle's corners, and its object.
+    pub triangles: Vec<[u32; 4]>,
+    /// Each object's range of triangles.
+    pub triangle_ranges: Vec<std::ops::Range<u32>>,
+}
+
+/// Maps rendered and blurred in one batch: the atlas holds this many
+/// tiles.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Batch {
+    first: u32,
+    count: u32,
+    /// (object, first instance, instance count): the object drawn into the
+    /// maps `instances[first..first + count]` name.
+    draws: Vec<(usize, u32, u32)>,
+}
+
+/// Largest dispatch along y (WebGPU's default limit).
+const MAX_DISPATCH: u32 = 65_535;
+
+/// Side of the atlas the maps are rendered into, at most.
+const MAX_ATLAS: u32 = 8192;
+
+/// The smallest buffer: larger than any one element a shader binds.
+const MIN_BUFFER: u64 = 256;
+
+/// A storage buffer that grows to fit.
+struct Growing {
+    buffer: wgpu::Buffer,
+    label: &'static str,
+    usage: wgpu::BufferUsages,
+}
+
+impl Growing {
+    fn new(ctx: &GpuContext, label: &'static str, usage: wgpu::BufferUsages) -> Growing {
+        let usage = usage | wgpu::BufferUsages::COPY_DST;
+        Growing {
+            buffer: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: MIN_BUFFER,
+                usage,
+                mapped_at_creation: false,
+            }),
+            label,
+            usage,
+        }
+    }
+
+    /// At least `bytes` long (contents lost when it grows).
+    fn reserve(&mut self, ctx: &GpuContext, bytes: u64) {
+        if self.buffer.size() < bytes {
+            self.buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(self.label),
+                size: bytes.next_power_of_two(),
+                usage: self.usage,
+                mapped_at_creation: false,
+            });
+        }
+    }
+
+    fn write<T: Pod>(&mut self, ctx: &GpuContext, values: &[T]) {
+        let bytes: &[u8] = bytemuck::cast_slice(values);
+        self.reserve(ctx, bytes.len() as u64);
+        ctx.queue.write_buffer(&self.buffer, 0, bytes);
+    }
+}
+
+/// Targets of one image size.
+struct Targets {
+    width: u32,
+    height: u32,
+    surface: wgpu::TextureView,
+    depth: wgpu::TextureView,
+    image: wgpu::Texture,
+}
+
+/// Pipelines and buffers.
+pub struct Gpu {
+    ctx: Arc<GpuContext>,
+    cover: wgpu::RenderPipeline,
+    cover_layout: wgpu::BindGroupLayout,
+    blur_rows: wgpu::ComputePipeline,
+    blur_columns: wgpu::ComputePipeline,
+    blur_layout: wgpu::BindGroupLayout,
+    surface: wgpu::RenderPipeline,
+    surface_layout: wgpu::BindGroupLayout,
+    pixels: wgpu::ComputePipeline,
+    vertices_pipeline: wgpu::ComputePipeline,
+    deferred_layout: wgpu::BindGroupLayout,
+
+    vertices: wgpu::Buffer,
+    triangles: wgpu::Buffer,
+    triangle_ranges: Vec<std::ops::Range<u32>>,
+    vertex_count: u32,
+    objects: wgpu::Buffer,
+    lights: wgpu::Buffer,
+    maps: Growing,
+    ranges: Growing,
+    instances: Growing,
+    blurred: Growing,
+    rows: Growing,
+    shading: Growing,
+    vertex_radiance: wgpu::Buffer,
+    atlas_blocks: Slots<AtlasBlock>,
+    params: Slots<Params>,
+    view: wgpu::Buffer,
+    coverage: Option<(u32, wgpu::TextureView)>,
+    targets: Option<Targets>,
+
+    resolution: u32,
+    light_count: u32,
+    self_visibility: bool,
+    batches: Vec<Batch>,
+    /// Maps of the current plan.
+    pub map_count: u32,
+}
+
+/// Slot of the per-vertex and per-pixel parameters.
+const VERTEX_SLOT: usize = 0;
+const PIXEL_SLOT: usize = 1;
+
+fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
+    let source = format!("{}\n{source}", include_str!("shaders/common.wgsl"));
+    ctx.device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        })
+}
+
+fn layout(
+    ctx: &GpuContext,
+    label: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+) -> wgpu::BindGroupLayout {
+    ctx.device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries,
+        })
+}
+
+fn pipeline_layout(ctx: &GpuContext, layout: &wgpu::BindGroupLayout) -> wgpu::PipelineLayout {
+    ctx.device
+        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: None,
+            bind_group_layouts: &[Some(layout)],
+            immediate_size: 0,
+        })
+}
+
+fn compute(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(&pipeline_layout(ctx, layout)),
+            module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+}
+
+fn texture_entry(
+    binding: u32,
+    sample_type: wgpu::TextureSampleType,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding, resource }
+}
+
+/// The coverage atlas's format: one float per texel, rendered and read.
+const COVERAGE: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+/// The visible surface: position bits and triangle id.
+const SURFACE: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
+const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+impl Gpu {
+    /// Pipelines, and the scene's geometry uploaded.
+    pub fn new(
+        ctx: Arc<GpuContext>,
+        geometry: &Geometry,
+        objects: &[GpuObject],
+        resolution: u32,
+        self_visibility: bool,
+    ) -> Gpu {
+        let c = &*ctx;
+        let vertex = wgpu::ShaderStages::VERTEX;
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let maps_module = shader(c, "occlusion maps", include_str!("shaders/maps.wgsl"));
+        let cover_layout = layout(
+            c,
+            "cover",
+            &[
+                dynamic_uniform(0, vertex),
+                storage(1, true, vertex),
+                storage(2, true, vertex),
+                storage(3, true, vertex),
+                uniform(4, vertex),
+                storage(5, true, vertex),
+                storage(6, true, vertex),
+            ],
+        );
+        let cover = c
+            .device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("cover"),
+                layout: Some(&pipeline_layout(c, &cover_layout)),
+                vertex: wgpu::VertexState {
+                    module: &maps_module,
+                    entry_point: Some("cover"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: None,
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &maps_module,
+                    entry_point: Some("covered"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(COVERAGE.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+        let blur_layout = layout(
+            c,
+            "blur",
+            &[
+                dynamic_uniform(0, cs),
+                storage(5, true, cs),
+                texture_entry(7, wgpu::TextureSampleType::Float { filterable: false }, cs),
+                storage(8, false, cs),
+                storage(9, false, cs),
+            ],
+        );
+        let blur_rows = compute(c, &blur_layout, &maps_module, "blur_rows");
+        let blur_columns = compute(c, &blur_layout, &maps_module, "blur_columns");
+
+        let surface_module = shader(c, "visible surface", include_str!("shaders/gbuffer.wgsl"));
+        let surface_layout = layout(
+            c,
+            "visible surface",
+            &[
+                uniform(0, vertex),
+                storage(1, true, vertex),
+                storage(2, true, vertex),
+                storage(3, true, vertex),
+            ],
+        );
+        let surface = c
+            .device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("visible surface"),
+                layout: Some(&pipeline_layout(c, &surface_layout)),
+                vertex: wgpu::VertexState {
+                    module: &surface_module,
+                    entry_point: Some("surface"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &surface_module,
+                    entry_point: Some("visible"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(SURFACE.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+
+        let deferred_module = shader(c, "deferred", include_str!("shaders/deferred.wgsl"));
+        let mut deferred_entries = vec![
+            dynamic_uniform(0, cs),
+            storage(1, true, cs),
+            storage(2, true, cs),
+            storage(3, true, cs),
+            uniform(4, cs),
+        ];
+        deferred_entries.extend((5..=8).map(|b| storage(b, true, cs)));
+        deferred_entries.push(texture_entry(9, wgpu::TextureSampleType::Uint, cs));
+        deferred_entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 10,
+            visibility: cs,
+            ty: wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::Rgba32Float,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            count: None,
+        });
+        deferred_entries.push(storage(11, false, cs));
+        let deferred_layout = layout(c, "deferred", &deferred_entries);
+        let pixels = compute(c, &deferred_layout, &deferred_module, "at_pixels");
+        let vertices_pipeline = compute(c, &deferred_layout, &deferred_module, "at_vertices");
+
+        let storage_usage = wgpu::BufferUsages::STORAGE;
+        let vertex_count = geometry.vertices.len() as u32;
+        let buffer = |label: &str, size: u64, usage| {
+            c.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Gpu {
+            vertices: c.create_buffer_init("vertices", &geometry.vertices, storage_usage),
+            triangles: c.create_buffer_init("triangles", &geometry.triangles, storage_usage),
+            triangle_ranges: geometry.triangle_ranges.clone(),
+            vertex_count,
+            objects: c.create_buffer_init(
+                "objects",
+                objects,
+                storage_usage | wgpu::BufferUsages::COPY_DST,
+            ),
+            lights: buffer(
+                "lights",
+                (MAX_LIGHTS * size_of::<GpuLight>()) as u64,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            ),
+            maps: Growing::new(c, "maps", storage_usage),
+            ranges: Growing::new(c, "map ranges", storage_usage),
+            instances: Growing::new(c, "map instances", storage_usage),
+            blurred: Growing::new(c, "occlusion maps", storage_usage),
+            rows: Growing::new(c, "blurred rows", storage_usage),
+            shading: Growing::new(c, "vertex shading", storage_usage),
+            vertex_radiance: buffer(
+                "vertex radiance",
+                16 * vertex_count as u64,
+                storage_usage | wgpu::BufferUsages::COPY_SRC,
+            ),
+            atlas_blocks: Slots::new(c, "atlas", 1),
+            params: Slots::new(c, "deferred", 2),
+            view: buffer(
+                "view",
+                size_of::<Mat4>() as u64,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            ),
+            coverage: None,
+            targets: None,
+            cover,
+            cover_layout,
+            blur_rows,
+            blur_columns,
+            blur_layout,
+            surface,
+            surface_layout,
+            pixels,
+            vertices_pipeline,
+            deferred_layout,
+            resolution,
+            light_count: 0,
+            self_visibility,
+            batches: Vec::new(),
+            map_count: 0,
+            ctx,
+        }
+    }
+
+    /// The objects' poses and materials.
+    pub fn set_objects(&self, objects: &[GpuObject]) {
+        self.ctx
+            .queue
+            .write_buffer(&self.objects, 0, bytemuck::cast_slice(objects));
+    }
+
+    /// At most [`MAX_LIGHTS`].
+    pub fn set_lights(&mut self, lights: &[GpuLight]) {
+        assert!(lights.len() <= MAX_LIGHTS, "{} lights", lights.len());
+        self.light_count = lights.len() as u32;
+        self.ctx
+            .queue
+            .write_buffer(&self.lights, 0, bytemuck::cast_slice(lights));
+    }
+
+    /// Per vertex, the self-shadowed radiance L_s (rgb and a pad), then the
+    /// weight v_s max(0, n·ω_i) of each light (eq. 8's T): `4 + lights`
+    /// floats per vertex.
+    pub fn set_shading(&mut self, shading: &[f32]) {
+        self.shading.write(&self.ctx, shading);
+    }
+
+    /// Takes `plan` for the next [`Gpu::record_maps`]: uploads its windows
+    /// and ranges and lays its maps out in atlas batches. `groups[o]` is the
+    /// group of object o.
+    pub fn set_plan(&mut self, plan: &Plan, groups: &[u32]) {
+        let n = self.resolution;
+        let limit = self
+            .ctx
+            .device
+            .limits()
+            .max_texture_dimension_2d
+            .min(MAX_ATLAS);
+        let per_row = (limit / n).max(1);
+        let capacity = (per_row * per_row).min(MAX_DISPATCH);
+        let count = plan.maps.len() as u32;
+        self.map_count = count;
+        self.maps.write(&self.ctx, &plan.maps);
+        self.ranges.write(&self.ctx, &plan.ranges);
+        let n2 = (n * n) as u64;
+        self.blurred
+            .reserve(&self.ctx, 4 * n2 * count.max(1) as u64);
+        self.rows
+            .reserve(&self.ctx, 4 * n2 * count.clamp(1, capacity) as u64);
+        let mut instances: Vec<u32> = Vec::new();
+        self.batches.clear();
+        let mut first = 0;
+        while first < count {
+            let batch_count = (count - first).min(capacity);
+            let maps = &plan.maps[first as usize..(first + batch_count) as usize];
+            let mut draws = Vec::new();
+            for (object, &group) in groups.iter().enumerate() {
+                let start = instances.len() as u32;
+                instances.extend(
+                    maps.iter()
+                        .enumerate()
+                        .filter(|(_, m)| m.occluder == group)
+                        .map(|(k, _)| first + k as u32),
+                );
+                let drawn = instances.len() as u32 - start;
+                if drawn > 0 {
+                    draws.push((object, start, drawn));
+                }
+            }
+            self.batches.push(Batch {
+                first,
+                count: batch_count,
+                draws,
+            });
+            first += batch_count;
+        }
+        self.instances.write(&self.ctx, &instances);
+        // The atlas: as many tiles as the largest batch needs, square.
+        let largest = self.batches.iter().map(|b| b.count).max().unwrap_or(1);
+        let tiles = (largest as f64).sqrt().ceil() as u32;
+        let side = (tiles * n).min(per_row * n);
+        if self.coverage.as_ref().is_none_or(|(s, _)| *s < side) {
+            let texture = self.ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("coverage atlas"),
+                size: wgpu::Extent3d {
+                    width: side,
+                    height: side,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: COVERAGE,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            });
+            self.coverage = Some((side, texture.create_view(&Default::default())));
+        }
+        if self.atlas_blocks.capacity() < self.batches.len() {
+            self.atlas_blocks = Slots::new(&self.ctx, "atlas", self.batches.len());
+        }
+    }
+
+    /// Renders and blurs every map of the plan.
+    pub fn record_maps(&self, encoder: &mut wgpu::CommandEncoder) {
+        let Some((side, coverage)) = &self.coverage else {
+            return;
+        };
+        let n = self.resolution;
+        let cover_group = self
+            .ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("cover"),
+                layout: &self.cover_layout,
+                entries: &[
+                    entry(0, self.atlas_blocks.binding()),
+                    entry(1, self.vertices.as_entire_binding()),
+                    entry(2, self.triangles.as_entire_binding()),
+                    entry(3, self.objects.as_entire_binding()),
+                    entry(4, self.lights.as_entire_binding()),
+                    entry(5, self.maps.buffer.as_entire_binding()),
+                    entry(6, self.instances.buffer.as_entire_binding()),
+                ],
+            });
+        let blur_group = self
+            .ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("blur"),
+                layout: &self.blur_layout,
+                entries: &[
+                    entry(0, self.atlas_blocks.binding()),
+                    entry(5, self.maps.buffer.as_entire_binding()),
+                    entry(7, wgpu::BindingResource::TextureView(coverage)),
+                    entry(8, self.rows.buffer.as_entire_binding()),
+                    entry(9, self.blurred.buffer.as_entire_binding()),
+                ],
+            });
+        for (b, batch) in self.batches.iter().enumerate() {
+            let offset = self.atlas_blocks.write(
+                &self.ctx,
+                b,
+                &AtlasBlock {
+                    resolution: n,
+                    per_row: side / n,
+                    side: *side as f32,
+                    first: batch.first,
+                },
+            );
+            {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("occluders onto maps"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: coverage,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&self.cover);
+                pass.set_bind_group(0, &cover_group, &[offset]);
+                for &(object, first, count) in &batch.draws {
+                    let range = &self.triangle_ranges[object];
+                    pass.draw(3 * range.start..3 * range.end, first..first + count);
+                }
+            }
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("box blur"),
+                timestamp_writes: None,
+            });
+            pass.set_bind_group(0, &blur_group, &[offset]);
+            for pipeline in [&self.blur_rows, &self.blur_columns] {
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(n.div_ceil(64), batch.count, 1);
+            }
+        }
+    }
+
+    fn deferred_group(
+        &self,
+        image: Option<&wgpu::TextureView>,
+        surface: Option<&wgpu::TextureView>,
+    ) -> wgpu::BindGroup {
+        // The per-vertex pass binds the last image targets, or stand-ins.
+        let stand_in;
+        let (surface, image) = match (surface, image, &self.targets) {
+            (Some(s), Some(i), _) => (s.clone(), i.clone()),
+            (_, _, Some(t)) => (t.surface.clone(), t.image.create_view(&Default::default())),
+            _ => {
+                stand_in = Targets::new(&self.ctx, 1, 1);
+                (
+                    stand_in.surface.clone(),
+                    stand_in.image.create_view(&Default::default()),
+                )
+            }
+        };
+        self.ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("deferred"),
+                layout: &self.deferred_layout,
+                entries: &[
+                    entry(0, self.params.binding()),
+                    entry(1, self.vertices.as_entire_binding()),
+                    entry(2, self.triangles.as_entire_binding()),
+                    entry(3, self.objects.as_entire_binding()),
+                    entry(4, self.lights.as_entire_binding()),
+                    entry(5, self.maps.buffer.as_entire_binding()),
+                    entry(6, self.ranges.buffer.as_entire_binding()),
+                    entry(7, self.blurred.buffer.as_entire_binding()),
+                    entry(8, self.shading.buffer.as_entire_binding()),
+                    entry(9, wgpu::BindingResource::TextureView(&surface)),
+                    entry(10, wgpu::BindingResource::TextureView(&image)),
+                    entry(11, self.vertex_radiance.as_entire_binding()),
+                ],
+            })
+    }
+
+    fn params(&self, eye: Vec3, width: u32, height: u32) -> Params {
+        Params {
+            eye: eye.extend(1.0),
+            lights: self.light_count,
+            resolution: self.resolution,
+            self_visibility: self.self_visibility as u32,
+            vertices: self.vertex_count,
+            width,
+            height,
+            stride: 4 + self.light_count,
+            pad: 0,
+        }
+    }
+
+    /// The radiance of every vertex toward `eye`, into
+    /// [`Gpu::vertex_radiance`].
+    pub fn record_vertices(&self, encoder: &mut wgpu::CommandEncoder, eye: Vec3) {
+        let offset = self
+            .params
+            .write(&self.ctx, VERTEX_SLOT, &self.params(eye, 0, 0));
+        let group = self.deferred_group(None, None);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("deferred pass, vertices"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.vertices_pipeline);
+        pass.set_bind_group(0, &group, &[offset]);
+        pass.dispatch_workgroups(self.vertex_count.div_ceil(64), 1, 1);
+    }
+
+    /// The visible surface of `camera`'s image and the deferred pass over
+    /// it, into [`Gpu::image`].
+    pub fn record_image(&mut self, encoder: &mut wgpu::CommandEncoder, camera: &Camera, near: f32) {
+        let (width, height) = (camera.width, camera.height);
+        if self
+            .targets
+            .as_ref()
+            .is_none_or(|t| (t.width, t.height) != (width, height))
+        {
+            self.targets = Some(Targets::new(&self.ctx, width, height));
+        }
+        let targets = self.targets.as_ref().expect("made above");
+        let clip = clip_from_world(camera, near);
+        self.ctx
+            .queue
+            .write_buffer(&self.view, 0, bytemuck::bytes_of(&clip));
+        let surface_group = self
+            .ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("visible surface"),
+                layout: &self.surface_layout,
+                entries: &[
+                    entry(0, self.view.as_entire_binding()),
+                    entry(1, self.vertices.as_entire_binding()),
+                    entry(2, self.triangles.as_entire_binding()),
+                    entry(3, self.objects.as_entire_binding()),
+                ],
+            });
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("visible surface"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &targets.surface,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &targets.depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.surface);
+            pass.set_bind_group(0, &surface_group, &[]);
+            pass.draw(
+                0..3 * self.triangle_ranges.last().map_or(0, |r| r.end),
+                0..1,
+            );
+        }
+        let offset = self.params.write(
+            &self.ctx,
+            PIXEL_SLOT,
+            &self.params(camera.eye, width, height),
+        );
+        let image_view = targets.image.create_view(&Default::default());
+        let group = self.deferred_group(Some(&image_view), Some(&targets.surface));
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("deferred pass, pixels"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pixels);
+        pass.set_bind_group(0, &group, &[offset]);
+        pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+    }
+
+    /// One `vec4` per vertex: radiance, and 1 in w.
+    pub fn vertex_radiance(&self) -> &wgpu::Buffer {
+        &self.vertex_radiance
+    }
+
+    /// The last image: `Rgba32Float`, radiance and 1 in alpha where a
+    /// surface is seen, zero elsewhere.
+    pub fn image(&self) -> Option<&wgpu::Texture> {
+        self.targets.as_ref().map(|t| &t.image)
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.vertex_count as usize
+    }
+}
+
+impl Targets {
+    fn new(ctx: &GpuContext, width: u32, height: u32) -> Targets {
+        let texture = |label, format, usage| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let attach = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        Targets {
+            width,
+            height,
+            surface: texture(
+                "visible surface",
+                SURFACE,
+                attach | wgpu::TextureUsages::TEXTURE_BINDING,
+            )
+            .create_view(&Default::default()),
+            depth: texture("depth", DEPTH, attach).create_view(&Default::default()),
+            image: texture(
+                "image",
+                wgpu::TextureFormat::Rgba32Float,
+                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+            ),
+        }
+    }
+}

@@ -1,0 +1,146 @@
+//! Occluder groups (§4.2.3): objects near each other cast through one
+//! occlusion map.
+
+use shadow_core::{Aabb, Error, Result};
+
+use crate::config::Grouping;
+
+/// A partition of a scene's objects into occluder groups.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Groups {
+    /// The group of each object.
+    pub of_object: Vec<u32>,
+    /// The objects of each group, ascending.
+    pub members: Vec<Vec<usize>>,
+}
+
+impl Groups {
+    /// Groups the objects whose bounds are `boxes` by `grouping`.
+    pub fn new(grouping: &Grouping, boxes: &[Aabb]) -> Result<Groups> {
+        let n = boxes.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        match grouping {
+            Grouping::Overlapping { overlap } => {
+                let scene = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
+                let pad = 1e-3 * scene.diagonal();
+                let padded: Vec<Aabb> = boxes
+                    .iter()
+                    .map(|b| Aabb {
+                        min: b.min - pad,
+                        max: b.max + pad,
+                    })
+                    .collect();
+                let volume = |b: &Aabb| (b.max - b.min).max(glam::Vec3::ZERO).element_product();
+                for a in 0..n {
+                    for b in a + 1..n {
+                        let common = Aabb {
+                            min: padded[a].min.max(padded[b].min),
+                            max: padded[a].max.min(padded[b].max),
+                        };
+                        let smaller = volume(&padded[a]).min(volume(&padded[b]));
+                        if volume(&common) > overlap * smaller {
+                            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+                            parent[ra.max(rb)] = ra.min(rb);
+                        }
+                    }
+                }
+            }
+            Grouping::Explicit(groups) => {
+                let mut seen = vec![false; n];
+                for group in groups {
+                    for &o in group {
+                        if o >= n || seen[o] {
+                            return Err(Error::config(
+                                "deferred-shadow",
+                                format!(
+                                    "explicit groups {groups:?}: object {o} is out of range or in two groups ({n} objects)"
+                                ),
+                            ));
+                        }
+                        seen[o] = true;
+                        parent[o] = group[0];
+                    }
+                }
+                if let Some(o) = seen.iter().position(|s| !s) {
+                    return Err(Error::config(
+                        "deferred-shadow",
+                        format!("explicit groups {groups:?} leave object {o} out"),
+                    ));
+                }
+            }
+        }
+        let mut of_object = vec![u32::MAX; n];
+        let mut members: Vec<Vec<usize>> = Vec::new();
+        for o in 0..n {
+            let r = root(&mut parent, o);
+            if of_object[r] == u32::MAX {
+                of_object[r] = members.len() as u32;
+                members.push(Vec::new());
+            }
+            of_object[o] = of_object[r];
+            members[of_object[o] as usize].push(o);
+        }
+        Ok(Groups { of_object, members })
+    }
+
+    pub fn len(&self) -> usize {
+        self.members.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.members.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+
+    fn boxed(min: [f32; 3], max: [f32; 3]) -> Aabb {
+        Aabb {
+            min: Vec3::from(min),
+            max: Vec3::from(max),
+        }
+    }
+
+    #[test]
+    fn a_board_in_two_colours_is_one_group_and_a_piece_on_it_another() {
+        let light = boxed([-1.0, 0.0, -1.0], [1.0, 0.0, 1.0]);
+        let dark = boxed([-1.0, 0.0, -0.9], [0.9, 0.0, 1.0]);
+        let piece = boxed([0.0, 0.0, 0.0], [0.1, 0.3, 0.1]);
+        let other = boxed([0.5, 0.0, 0.5], [0.6, 0.3, 0.6]);
+        let groups = Groups::new(
+            &Grouping::Overlapping { overlap: 0.5 },
+            &[light, piece, dark, other],
+        )
+        .unwrap();
+        assert_eq!(groups.members, vec![vec![0, 2], vec![1], vec![3]]);
+        assert_eq!(groups.of_object, vec![0, 1, 0, 2]);
+    }
+
+    #[test]
+    fn explicit_groups_must_partition_the_objects() {
+        let b = boxed([0.0; 3], [1.0; 3]);
+        let ok = Groups::new(&Grouping::Explicit(vec![vec![1, 2], vec![0]]), &[b; 3]).unwrap();
+        assert_eq!(ok.of_object, vec![0, 1, 1]);
+        for bad in [
+            vec![vec![0, 1]],
+            vec![vec![0, 1], vec![1, 2]],
+            vec![vec![0, 1, 2, 3]],
+        ] {
+            assert!(matches!(
+                Groups::new(&Grouping::Explicit(bad), &[b; 3]),
+                Err(Error::InvalidConfig { .. })
+            ));
+        }
+    }
+}

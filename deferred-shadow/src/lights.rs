@@ -1,0 +1,251 @@
+//! The environment split into area lights (§4.2.1), after Kollig and Keller
+//! 2003: light directions placed where the luminance is, then relaxed by
+//! Lloyd's algorithm with the luminance as density, so that each light's
+//! region W_i (its spherical Voronoi cell) holds a share of the light and
+//! bright, small features get small regions. Each light carries its
+//! radiosity B_i = ∫_{W_i} L dω (eq. 4's normalization: a direction's
+//! radiance times its solid angle), its solid angle Ω_i and the direction
+//! ω_i at its luminance-weighted centroid.
+
+use glam::Vec3;
+use rayon::prelude::*;
+use shadow_core::{Environment, Error, Result, environment::luminance};
+
+/// One area light W_i.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AreaLight {
+    /// ω_i: the unit direction toward the light, its region's centroid.
+    pub direction: Vec3,
+    /// B_i = ∫_{W_i} L dω, linear RGB.
+    pub radiosity: Vec3,
+    /// Ω_i, steradians.
+    pub solid_angle: f32,
+}
+
+/// Relaxation runs on a copy of the map at most this many texels wide
+/// (integral-preserving); the final regions take every texel of the map.
+const WORK_WIDTH: usize = 256;
+
+/// Maps narrower than this are split into finer texels (each an exact
+/// part of one of the map's) so that regions are not made of a few texels.
+const MIN_WIDTH: usize = 128;
+
+/// Lloyd iterations: the centroids move by well under a texel of the
+/// working map after this many on the shipped environments.
+const ITERATIONS: usize = 24;
+
+/// Splits `environment` into `count` area lights.
+///
+/// Fails for a count of zero or more lights than the map has texels.
+pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLight>> {
+    let texels = environment.width() * environment.height();
+    if count == 0 || count > texels {
+        return Err(Error::config(
+            "deferred-shadow",
+            format!("{count} area lights for a {texels}-texel environment"),
+        ));
+    }
+    let work = if environment.width() > WORK_WIDTH {
+        environment.downsampled(WORK_WIDTH, WORK_WIDTH / 2)
+    } else {
+        environment.clone()
+    };
+    let samples = Samples::of(&work);
+    let mut centres = samples.importance_seeds(count);
+    for _ in 0..ITERATIONS {
+        let owner = samples.nearest(&centres);
+        centres = samples.weighted_centroids(&owner, &centres);
+    }
+    let full = Samples::of(environment);
+    let regions = full.nearest(&centres);
+    let mut lights: Vec<AreaLight> = centres
+        .iter()
+        .map(|&direction| AreaLight {
+            direction,
+            radiosity: Vec3::ZERO,
+            solid_angle: 0.0,
+        })
+        .collect();
+    let mut centroid = vec![Vec3::ZERO; count];
+    for (t, &r) in regions.iter().enumerate() {
+        let light = &mut lights[r as usize];
+        light.radiosity += full.radiance[t] * full.solid_angle[t];
+        light.solid_angle += full.solid_angle[t];
+        centroid[r as usize] += full.directions[t] * full.weight[t];
+    }
+    for (light, c) in lights.iter_mut().zip(centroid) {
+        light.direction = c.try_normalize().unwrap_or(light.direction);
+    }
+    Ok(lights)
+}
+
+/// A map's texels as points on the sphere with their weights.
+struct Samples {
+    directions: Vec<Vec3>,
+    solid_angle: Vec<f32>,
+    radiance: Vec<Vec3>,
+    /// Luminance × solid angle, plus a little of the mean so that a black
+    /// region still pulls its centre toward its middle.
+    weight: Vec<f32>,
+}
+
+impl Samples {
+    /// The texels of `env`, each split into f × f finer ones (f the least
+    /// whole factor that makes the map at least [`MIN_WIDTH`] wide): the
+    /// same piecewise-constant radiance, so every integral is the map's.
+    fn of(env: &Environment) -> Samples {
+        let f = MIN_WIDTH.div_ceil(env.width()).max(1);
+        let (w, h) = (env.width() * f, env.height() * f);
+        let mut s = Samples {
+            directions: Vec::with_capacity(w * h),
+            solid_angle: Vec::with_capacity(w * h),
+            radiance: Vec::with_capacity(w * h),
+            weight: Vec::with_capacity(w * h),
+        };
+        let pi = std::f64::consts::PI;
+        for row in 0..h {
+            let (t0, t1) = (pi * row as f64 / h as f64, pi * (row + 1) as f64 / h as f64);
+            let omega = ((t0.cos() - t1.cos()) * 2.0 * pi / w as f64) as f32;
+            let theta = (0.5 * (t0 + t1)) as f32;
+            for col in 0..w {
+                let phi = (2.0 * pi * (col as f64 + 0.5) / w as f64) as f32;
+                let l = env.texel(row / f, col / f);
+                s.directions
+                    .push(shadow_core::environment::direction_from_angles(theta, phi));
+                s.solid_angle.push(omega);
+                s.radiance.push(l);
+                s.weight.push(luminance(l).max(0.0) * omega);
+            }
+        }
+        let mean = s.weight.iter().sum::<f32>() / (4.0 * std::f32::consts::PI);
+        for (weight, omega) in s.weight.iter_mut().zip(&s.solid_angle) {
+            *weight += 1e-3 * mean.max(f32::MIN_POSITIVE) * omega;
+        }
+        s
+    }
+
+    /// `count` directions drawn in proportion to the weights, stratified:
+    /// the texel at each (k + ½)/count of the cumulative weight (a texel
+    /// drawn twice is moved to the next unused one).
+    fn importance_seeds(&self, count: usize) -> Vec<Vec3> {
+        let total: f64 = self.weight.iter().map(|&w| w as f64).sum();
+        let mut used = vec![false; self.weight.len()];
+        let mut seeds = Vec::with_capacity(count);
+        let mut cumulative = 0.0f64;
+        let mut t = 0;
+        for k in 0..count {
+            let target = (k as f64 + 0.5) / count as f64 * total;
+            while t + 1 < self.weight.len() && cumulative + (self.weight[t] as f64) < target {
+                cumulative += self.weight[t] as f64;
+                t += 1;
+            }
+            let mut pick = t;
+            while used[pick] {
+                pick = (pick + 1) % used.len();
+            }
+            used[pick] = true;
+            seeds.push(self.directions[pick]);
+        }
+        seeds
+    }
+
+    /// The index of the nearest centre of every texel.
+    fn nearest(&self, centres: &[Vec3]) -> Vec<u32> {
+        self.directions
+            .par_iter()
+            .map(|d| {
+                let mut best = (f32::NEG_INFINITY, 0u32);
+                for (i, c) in centres.iter().enumerate() {
+                    let dot = d.dot(*c);
+                    if dot > best.0 {
+                        best = (dot, i as u32);
+                    }
+                }
+                best.1
+            })
+            .collect()
+    }
+
+    /// Each region's weighted centroid, on the sphere; a region that lost
+    /// every texel keeps its centre.
+    fn weighted_centroids(&self, owner: &[u32], centres: &[Vec3]) -> Vec<Vec3> {
+        let mut sums = vec![Vec3::ZERO; centres.len()];
+        for (t, &o) in owner.iter().enumerate() {
+            sums[o as usize] += self.directions[t] * self.weight[t];
+        }
+        sums.iter()
+            .zip(centres)
+            .map(|(s, c)| s.try_normalize().unwrap_or(*c))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn sunny() -> Environment {
+        let (w, h) = (128, 64);
+        let texels = (0..w * h)
+            .map(|i| {
+                let (row, col) = (i / w, i % w);
+                if (10..13).contains(&row) && (40..43).contains(&col) {
+                    Vec3::splat(500.0)
+                } else {
+                    Vec3::new(0.2, 0.3, 0.5) * (1.2 - row as f32 / h as f32)
+                }
+            })
+            .collect();
+        Environment::new("sunny", w, h, texels).unwrap()
+    }
+
+    #[test]
+    fn regions_tile_the_sphere_and_hold_all_the_light() {
+        for env in [Environment::uniform(Vec3::ONE), sunny()] {
+            for q in [16, 32, 64] {
+                let lights = decompose(&env, q).unwrap();
+                assert_eq!(lights.len(), q);
+                let omega: f32 = lights.iter().map(|l| l.solid_angle).sum();
+                assert_relative_eq!(omega, 4.0 * std::f32::consts::PI, max_relative = 1e-4);
+                let power: Vec3 = lights.iter().map(|l| l.radiosity).sum();
+                assert_relative_eq!(power, env.integral(), max_relative = 1e-4);
+                assert!(lights.iter().all(|l| l.solid_angle > 0.0));
+                for l in &lights {
+                    assert_relative_eq!(l.direction.length(), 1.0, epsilon = 1e-5);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bright_features_get_small_regions() {
+        let env = sunny();
+        let lights = decompose(&env, 32).unwrap();
+        let sun = env.direction(11, 41);
+        let at_sun = lights
+            .iter()
+            .max_by(|a, b| a.direction.dot(sun).total_cmp(&b.direction.dot(sun)))
+            .unwrap();
+        let mean = 4.0 * std::f32::consts::PI / 32.0;
+        assert!(at_sun.solid_angle < 0.2 * mean, "{} sr", at_sun.solid_angle);
+        assert!(at_sun.direction.dot(sun) > 0.99);
+        // A uniform sky gets regions of similar size.
+        let even = decompose(&Environment::uniform(Vec3::ONE), 32).unwrap();
+        let (lo, hi) = even.iter().fold((f32::MAX, 0.0f32), |(lo, hi), l| {
+            (lo.min(l.solid_angle), hi.max(l.solid_angle))
+        });
+        assert!(hi / lo < 1.6, "{lo} .. {hi}");
+    }
+
+    #[test]
+    fn impossible_counts_are_configuration_errors() {
+        let env = Environment::uniform(Vec3::ONE);
+        assert!(matches!(
+            decompose(&env, 0),
+            Err(Error::InvalidConfig { .. })
+        ));
+        let texels = env.width() * env.height();
+        assert!(decompose(&env, texels + 1).is_err());
+    }
+}

@@ -1,0 +1,195 @@
+//! Which occlusion maps a frame needs, where each lies and how much it is
+//! blurred (§4.2.2, eq. 5–6), planned on the CPU; the GPU renders and blurs
+//! them (`raster.rs`).
+//!
+//! For light i, occluder group A and receiver B, A's shadow is projected
+//! along ω_i onto the plane H_B through B's centre. The map is a square
+//! window of that plane around B's projected bounding sphere, in the light's
+//! frame (u_i, v_i, ω_i), so that a point p of B reads its map at
+//! (p·u_i, p·v_i): the orthogonal projection of §6.2.2. The coverage is
+//! convolved with a box of side s = √Ω_i · D, D = (c_A − c_B)·ω_i the
+//! distance from H_B to A's plane H_A; the window is widened by s/2 on each
+//! side so that occluders just outside B's footprint still blur into it.
+//!
+//! A pair whose occluder plane is not nearer the light than the receiver's
+//! (D ≤ 0: the occluder lies behind the receiver, as seen from the light)
+//! casts nothing: the plane approximation cannot say which part of B it
+//! shades, and the common case is a floor under an object, which must not
+//! darken the object for lights above. Pairs whose blurred shadow cannot
+//! reach the window are skipped.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec2, Vec3, Vec4};
+use shadow_core::Aabb;
+
+use crate::groups::Groups;
+use crate::lights::AreaLight;
+
+/// `Light` in the shaders: direction, radiosity and the plane's axes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GpuLight {
+    pub direction: Vec4,
+    pub radiosity: Vec4,
+    pub u: Vec4,
+    pub v: Vec4,
+}
+
+impl GpuLight {
+    pub fn new(light: &AreaLight) -> GpuLight {
+        let (u, v) = light.direction.any_orthonormal_pair();
+        GpuLight {
+            direction: light.direction.extend(light.solid_angle),
+            radiosity: light.radiosity.extend(0.0),
+            u: u.extend(0.0),
+            v: v.extend(0.0),
+        }
+    }
+
+    fn omega(&self) -> Vec3 {
+        self.direction.truncate()
+    }
+}
+
+/// `Map` in the shaders: one occlusion map's window and blur.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct MapWindow {
+    /// The window's centre in the light's plane, (p·u, p·v).
+    pub centre: Vec2,
+    /// 1 / the window's side, world units.
+    pub inverse_side: f32,
+    /// The box's side s, in texels.
+    pub blur: f32,
+    pub light: u32,
+    /// The occluder group.
+    pub occluder: u32,
+    /// The receiving object.
+    pub receiver: u32,
+    pub _pad: u32,
+}
+
+/// Every map of a frame, sorted by receiver and then light, with the range
+/// of maps each (receiver, light) reads.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Plan {
+    pub maps: Vec<MapWindow>,
+    /// `[first, count]` of receiver b and light i at `b * q + i`.
+    pub ranges: Vec<[u32; 2]>,
+}
+
+/// A bounding sphere from a box: its centre and half its diagonal.
+fn sphere(b: &Aabb) -> (Vec3, f32) {
+    (b.center(), 0.5 * b.diagonal())
+}
+
+impl Plan {
+    /// The maps of receivers with bounds `objects` under `lights`, cast by
+    /// `groups`, at `resolution` texels a side.
+    pub fn new(lights: &[GpuLight], objects: &[Aabb], groups: &Groups, resolution: u32) -> Plan {
+        let q = lights.len();
+        let occluders: Vec<(Vec3, f32)> = groups
+            .members
+            .iter()
+            .map(|m| sphere(&m.iter().map(|&o| objects[o]).fold(Aabb::EMPTY, Aabb::union)))
+            .collect();
+        let mut plan = Plan {
+            maps: Vec::new(),
+            ranges: vec![[0, 0]; objects.len() * q],
+        };
+        for (b, bounds) in objects.iter().enumerate() {
+            let (centre, radius) = sphere(bounds);
+            for (i, light) in lights.iter().enumerate() {
+                let first = plan.maps.len() as u32;
+                let omega = light.omega();
+                for (g, &(occluder, occluder_radius)) in occluders.iter().enumerate() {
+                    if groups.of_object[b] == g as u32 {
+                        continue;
+                    }
+                    let offset = occluder - centre;
+                    let distance = offset.dot(omega);
+                    if distance <= 0.0 {
+                        continue;
+                    }
+                    let side = light.direction.w.sqrt() * distance;
+                    let half = radius + 0.5 * side;
+                    let apart = (offset - distance * omega).length();
+                    if apart > occluder_radius + std::f32::consts::SQRT_2 * (half + 0.5 * side) {
+                        continue;
+                    }
+                    plan.maps.push(MapWindow {
+                        centre: Vec2::new(
+                            centre.dot(light.u.truncate()),
+                            centre.dot(light.v.truncate()),
+                        ),
+                        inverse_side: 1.0 / (2.0 * half),
+                        blur: side / (2.0 * half) * resolution as f32,
+                        light: i as u32,
+                        occluder: g as u32,
+                        receiver: b as u32,
+                        _pad: 0,
+                    });
+                }
+                plan.ranges[b * q + i] = [first, plan.maps.len() as u32 - first];
+            }
+        }
+        plan
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Grouping;
+
+    fn cube(centre: Vec3, half: f32) -> Aabb {
+        Aabb {
+            min: centre - half,
+            max: centre + half,
+        }
+    }
+
+    fn light(direction: Vec3, solid_angle: f32) -> GpuLight {
+        GpuLight::new(&AreaLight {
+            direction: direction.normalize(),
+            radiosity: Vec3::ONE,
+            solid_angle,
+        })
+    }
+
+    #[test]
+    fn a_ball_above_a_floor_shades_it_from_above_only() {
+        let floor = Aabb {
+            min: Vec3::new(-1.0, 0.0, -1.0),
+            max: Vec3::new(1.0, 0.0, 1.0),
+        };
+        let ball = cube(Vec3::new(0.0, 0.5, 0.0), 0.2);
+        let objects = [floor, ball];
+        let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &objects).unwrap();
+        let lights = [light(Vec3::Y, 0.1), light(-Vec3::Y, 0.1)];
+        let plan = Plan::new(&lights, &objects, &groups, 64);
+        // The floor receives the ball's shadow from above; the ball receives
+        // the floor's from below.
+        assert_eq!(plan.ranges, vec![[0, 1], [1, 0], [1, 0], [1, 1]]);
+        let map = plan.maps[0];
+        assert_eq!((map.light, map.occluder, map.receiver), (0, 1, 0));
+        // s = √Ω · D with D = 0.5; the window is the floor's sphere widened
+        // by s/2 each side.
+        let s = 0.1f32.sqrt() * 0.5;
+        let side = 2.0 * 2.0f32.sqrt() + s;
+        approx::assert_relative_eq!(map.inverse_side, 1.0 / side, max_relative = 1e-5);
+        approx::assert_relative_eq!(map.blur, s / side * 64.0, max_relative = 1e-5);
+    }
+
+    #[test]
+    fn far_occluders_and_one_object_give_no_maps() {
+        let a = cube(Vec3::ZERO, 0.1);
+        let b = cube(Vec3::new(5.0, 1.0, 0.0), 0.1);
+        let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &[a, b]).unwrap();
+        let plan = Plan::new(&[light(Vec3::Y, 0.01)], &[a, b], &groups, 64);
+        assert!(plan.maps.is_empty());
+        let alone = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &[a]).unwrap();
+        let plan = Plan::new(&[light(Vec3::Y, 4.0)], &[a], &alone, 64);
+        assert!(plan.maps.is_empty());
+    }
+}

@@ -1,0 +1,149 @@
+// The deferred pass (§4.2, §6.2.3): at each visible point, the radiance the
+// occluders take away, L_o = Σ_i B_i f_r(ω_i, ω_o) w_i(p) O_i(p), subtracted
+// from the self-shadowed radiance L_s interpolated from the vertices (eq. 3,
+// 8, 15), clamped at zero. w_i is the vertex weight v_s max(0, n·ω_i)
+// interpolated (eq. 7's correction), or max(0, n·ω_i) without it (eq. 4).
+// Occlusion ratios of several occluder groups combine as Soler and Sillion's
+// product of visibilities: O = 1 − Π_g (1 − O_g).
+
+struct Params {
+    eye: vec4<f32>,
+    lights: u32,
+    resolution: u32,
+    self_visibility: u32,
+    vertices: u32,
+    width: u32,
+    height: u32,
+    // Floats per vertex in `shading`: L_s (4), then one weight per light.
+    stride: u32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> vertices: array<Vertex>;
+@group(0) @binding(2) var<storage, read> triangles: array<vec4<u32>>;
+@group(0) @binding(3) var<storage, read> objects: array<Object>;
+@group(0) @binding(4) var<uniform> lights: array<Light, MAX_LIGHTS>;
+@group(0) @binding(5) var<storage, read> maps: array<Map>;
+@group(0) @binding(6) var<storage, read> ranges: array<vec2<u32>>;
+@group(0) @binding(7) var<storage, read> blurred: array<f32>;
+// Per vertex: L_s (rgb, and a pad), then v_s max(0, n·ω_i) per light.
+@group(0) @binding(8) var<storage, read> shading: array<f32>;
+@group(0) @binding(9) var gbuffer: texture_2d<u32>;
+@group(0) @binding(10) var image: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(11) var<storage, read_write> vertex_radiance: array<vec4<f32>>;
+
+fn world_position(o: Object, v: u32) -> vec3<f32> {
+    return (o.model * model_position(vertices[v])).xyz;
+}
+
+fn world_normal(o: Object, v: u32) -> vec3<f32> {
+    return (o.normal * vec4<f32>(vertices[v].normal.xyz, 0.0)).xyz;
+}
+
+fn self_radiance(v: u32) -> vec3<f32> {
+    let base = v * params.stride;
+    return vec3<f32>(shading[base], shading[base + 1u], shading[base + 2u]);
+}
+
+fn weight(v: u32, i: u32) -> f32 {
+    return shading[v * params.stride + 4u + i];
+}
+
+// O_i(p) for receiver `receiver`: every group's map, bilinear, combined.
+fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light) -> f32 {
+    let range = ranges[receiver * params.lights + i];
+    let n = params.resolution;
+    let a = vec2<f32>(dot(p, light.u.xyz), dot(p, light.v.xyz));
+    var visible = 1.0;
+    for (var k = range.x; k < range.x + range.y; k++) {
+        let m = maps[k];
+        let t = clamp((a - m.centre) * m.inverse_side * f32(n) + 0.5 * f32(n) - 0.5, vec2<f32>(0.0), vec2<f32>(f32(n - 1u)));
+        let t0 = vec2<u32>(floor(t));
+        let t1 = min(t0 + 1u, vec2<u32>(n - 1u));
+        let f = t - floor(t);
+        let base = k * n * n;
+        let top = mix(blurred[base + t0.y * n + t0.x], blurred[base + t0.y * n + t1.x], f.x);
+        let bottom = mix(blurred[base + t1.y * n + t0.x], blurred[base + t1.y * n + t1.x], f.x);
+        visible *= 1.0 - clamp(mix(top, bottom, f.y), 0.0, 1.0);
+    }
+    return 1.0 - visible;
+}
+
+// f_r(ω_i, ω_o): Lambert, or normalized Phong about the mirror of ω_o.
+fn brdf(o: Object, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
+    var f = o.diffuse.xyz / PI;
+    if any(o.specular.xyz > vec3<f32>(0.0)) {
+        let e = o.specular.w;
+        let r = 2.0 * dot(n, wo) * n - wo;
+        f += o.specular.xyz * pow(max(dot(r, wi), 0.0), e) * (e + 2.0) / (2.0 * PI);
+    }
+    return f;
+}
+
+// L = max(L_s − L_o, 0) at p on `object`, with the vertex data of `corners`
+// weighted by `bary`.
+fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u32>, bary: vec3<f32>) -> vec3<f32> {
+    let o = objects[object];
+    let wo = normalize(params.eye.xyz - p);
+    let q = params.lights;
+    var lost = vec3<f32>(0.0);
+    for (var i = 0u; i < q; i++) {
+        let light = lights[i];
+        let occluded = occlusion(object, i, p, light);
+        var w = max(dot(n, light.direction.xyz), 0.0);
+        if params.self_visibility != 0u {
+            w = bary.x * weight(corners.x, i) + bary.y * weight(corners.y, i) + bary.z * weight(corners.z, i);
+        }
+        lost += light.radiosity.xyz * brdf(o, n, light.direction.xyz, wo) * (w * occluded);
+    }
+    return max(ls - lost, vec3<f32>(0.0));
+}
+
+@compute @workgroup_size(8, 8)
+fn at_pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.width || gid.y >= params.height {
+        return;
+    }
+    let g = textureLoad(gbuffer, gid.xy, 0);
+    if g.w == 0u {
+        textureStore(image, gid.xy, vec4<f32>(0.0));
+        return;
+    }
+    let t = triangles[g.w - 1u];
+    let o = objects[t.w];
+    let p = bitcast<vec3<f32>>(g.xyz);
+    let a = world_position(o, t.x);
+    let e0 = world_position(o, t.y) - a;
+    let e1 = world_position(o, t.z) - a;
+    let e2 = p - a;
+    let d00 = dot(e0, e0);
+    let d01 = dot(e0, e1);
+    let d11 = dot(e1, e1);
+    let d20 = dot(e2, e0);
+    let d21 = dot(e2, e1);
+    let denominator = d00 * d11 - d01 * d01;
+    var bary = vec3<f32>(1.0 / 3.0);
+    if denominator > 0.0 {
+        let v = (d11 * d20 - d01 * d21) / denominator;
+        let w = (d00 * d21 - d01 * d20) / denominator;
+        bary = max(vec3<f32>(1.0 - v - w, v, w), vec3<f32>(0.0));
+        bary /= bary.x + bary.y + bary.z;
+    }
+    let n = normalize(bary.x * world_normal(o, t.x) + bary.y * world_normal(o, t.y) + bary.z * world_normal(o, t.z));
+    let ls = bary.x * self_radiance(t.x) + bary.y * self_radiance(t.y) + bary.z * self_radiance(t.z);
+    textureStore(image, gid.xy, vec4<f32>(shade(t.w, p, n, ls, t.xyz, bary), 1.0));
+}
+
+@compute @workgroup_size(64)
+fn at_vertices(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let v = gid.x;
+    if v >= params.vertices {
+        return;
+    }
+    let object = u32(vertices[v].position.w);
+    let o = objects[object];
+    let p = world_position(o, v);
+    let n = normalize(world_normal(o, v));
+    vertex_radiance[v] = vec4<f32>(shade(object, p, n, self_radiance(v), vec3<u32>(v), vec3<f32>(1.0, 0.0, 0.0)), 1.0);
+}

@@ -1,0 +1,349 @@
+//! The method on small scenes: the white furnace, one object alone, a ball
+//! on a floor, rigid motion, glossy objects and bad input.
+
+use std::sync::Arc;
+
+use approx::assert_relative_eq;
+use deferred_shadow::{Config, DeferredShadow};
+use glam::{Affine3A, Quat, Vec3};
+use shadow_core::{
+    Brdf, Camera, Environment, Frame, Object, Pose, Scene, ShadowMethod, gpu::test_context, shapes,
+};
+
+fn white() -> Brdf {
+    Brdf::lambert(Vec3::splat(0.8)).unwrap()
+}
+
+fn camera() -> Camera {
+    Camera::new(
+        Vec3::new(0.0, 2.0, 3.0),
+        Vec3::new(0.0, 0.3, 0.0),
+        Vec3::Y,
+        0.8,
+        64,
+        48,
+    )
+    .unwrap()
+}
+
+fn ball_on_floor() -> Scene {
+    let ball = shapes::uv_sphere("ball", Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32).unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 16).unwrap();
+    let objects = vec![
+        Object {
+            mesh: Arc::new(ball),
+            material: white(),
+        },
+        Object {
+            mesh: Arc::new(floor),
+            material: white(),
+        },
+    ];
+    Scene::still("ball on a floor", objects, camera()).unwrap()
+}
+
+fn run(method: &mut DeferredShadow, scene: &Scene, env: &Environment) {
+    method.prepare(scene).unwrap();
+    method.relight(env).unwrap();
+    method
+        .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+        .unwrap();
+}
+
+#[test]
+fn white_furnace_gives_the_albedo() {
+    let Some(ctx) = test_context() else { return };
+    let ball = shapes::uv_sphere("ball", Vec3::ZERO, 0.5, 16, 32).unwrap();
+    let scene = Scene::still(
+        "furnace",
+        vec![Object {
+            mesh: Arc::new(ball),
+            material: white(),
+        }],
+        camera(),
+    )
+    .unwrap();
+    let mut method = DeferredShadow::new(ctx, Config::default()).unwrap();
+    run(&mut method, &scene, &Environment::uniform(Vec3::ONE));
+    // One object: nothing casts on it.
+    assert_eq!(method.map_count(), Some(0));
+    let shaded = method.shade(scene.camera().eye).unwrap();
+    for v in shaded.flat() {
+        assert_relative_eq!(v, Vec3::splat(0.8), epsilon = 1e-3);
+    }
+    let image = method.render(scene.camera()).unwrap();
+    let covered: Vec<Vec3> = image
+        .pixels
+        .iter()
+        .zip(&image.covered)
+        .filter(|(_, c)| **c)
+        .map(|(p, _)| *p)
+        .collect();
+    assert!(covered.len() > 100, "{} pixels", covered.len());
+    for p in covered {
+        assert_relative_eq!(p, Vec3::splat(0.8), epsilon = 1e-3);
+    }
+}
+
+#[test]
+fn a_ball_shades_the_floor_under_it() {
+    let Some(ctx) = test_context() else { return };
+    let scene = ball_on_floor();
+    let mut method = DeferredShadow::new(ctx, Config::default()).unwrap();
+    run(&mut method, &scene, &Environment::uniform(Vec3::ONE));
+    assert!(method.map_count().unwrap() > 0);
+    let shaded = method.shade(scene.camera().eye).unwrap();
+    let floor = scene.objects()[1].mesh.positions();
+    let under = floor
+        .iter()
+        .position(|p| p.x.abs() < 0.01 && p.z.abs() < 0.01)
+        .unwrap();
+    let far = floor
+        .iter()
+        .position(|p| p.x.abs() > 1.9 && p.z.abs() > 1.9)
+        .unwrap();
+    let (under, far) = (shaded.radiance[1][under].x, shaded.radiance[1][far].x);
+    println!("floor under the ball {under}, at the corner {far}");
+    assert!(under < 0.2, "{under}");
+    assert!(far > 0.7, "{far}");
+    let image = method.render(scene.camera()).unwrap();
+    assert!(image.covered.iter().filter(|c| **c).count() > 1000);
+}
+
+/// An environment with a bright patch above the +X horizon over a dim sky.
+fn patchy() -> Environment {
+    let (w, h) = (64, 32);
+    let texels = (0..w * h)
+        .map(|i| {
+            let (row, col) = (i / w, i % w);
+            if (8..14).contains(&row) && (2..10).contains(&col) {
+                Vec3::new(20.0, 18.0, 15.0)
+            } else {
+                Vec3::new(0.3, 0.4, 0.6)
+            }
+        })
+        .collect();
+    Environment::new("patchy", w, h, texels).unwrap()
+}
+
+/// A cup: turned, open at the top, so that it shadows its own inside.
+fn cup() -> shadow_core::Mesh {
+    let profile = [
+        glam::Vec2::new(0.0, 0.0),
+        glam::Vec2::new(0.3, 0.0),
+        glam::Vec2::new(0.35, 0.4),
+        glam::Vec2::new(0.3, 0.4),
+        glam::Vec2::new(0.25, 0.05),
+        glam::Vec2::new(0.0, 0.05),
+    ];
+    shapes::lathe("cup", &profile, 24).unwrap()
+}
+
+/// A turned object shades as the unturned one under the environment turned
+/// the other way: the lighting is rotated into the object's frame, the
+/// transfer is not recomputed.
+#[test]
+fn turning_an_object_turns_its_lighting() {
+    let Some(ctx) = test_context() else { return };
+    let turn = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+    let object = Object {
+        mesh: Arc::new(cup()),
+        material: white(),
+    };
+    let scene = Scene::new(
+        "turning cup",
+        vec![object],
+        vec![
+            Frame {
+                time: 0.0,
+                poses: vec![Pose::Rigid(Affine3A::IDENTITY)],
+            },
+            Frame {
+                time: 1.0,
+                poses: vec![Pose::Rigid(Affine3A::from_quat(turn))],
+            },
+        ],
+        camera(),
+    )
+    .unwrap();
+    let env = patchy();
+    let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&env).unwrap();
+    method
+        .update(&scene.frame_geometry(1).unwrap(), scene.camera())
+        .unwrap();
+    let turned: Vec<Vec3> = method.shade(scene.camera().eye).unwrap().flat().collect();
+    let prepare = method
+        .profile()
+        .seconds_in(shadow_core::Stage::Update, "self transfer (ray-traced)");
+    assert_eq!(prepare, None, "turning recomputed the transfer");
+
+    let mut still = DeferredShadow::new(ctx, Config::default()).unwrap();
+    still.prepare(&scene).unwrap();
+    // The environment seen from the turned cup's frame: turned by R⁻¹.
+    still
+        .relight(&env.rotated(glam::Mat3::from_quat(turn.inverse())))
+        .unwrap();
+    still
+        .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+        .unwrap();
+    let expected: Vec<Vec3> = still.shade(scene.camera().eye).unwrap().flat().collect();
+    let scale = expected.iter().map(|v| v.x).fold(0.0, f32::max);
+    for (a, b) in turned.iter().zip(&expected) {
+        assert!((*a - *b).abs().max_element() < 0.02 * scale, "{a} vs {b}");
+    }
+}
+
+/// Recording into a caller's encoder gives what the blocking stages give.
+#[test]
+fn recorded_stages_match_the_blocking_ones() {
+    use shadow_core::gpu::GpuStages;
+    let Some(ctx) = test_context() else { return };
+    let scene = ball_on_floor();
+    let env = patchy();
+    let mut blocking = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    run(&mut blocking, &scene, &env);
+    let expected: Vec<Vec3> = blocking.shade(scene.camera().eye).unwrap().flat().collect();
+    let image = blocking.render(scene.camera()).unwrap();
+
+    let mut recorded = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    recorded.prepare(&scene).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    recorded.record_relight(&env, &mut encoder).unwrap();
+    recorded
+        .record_update(
+            &scene.frame_geometry(0).unwrap(),
+            scene.camera(),
+            &mut encoder,
+        )
+        .unwrap();
+    let buffer = recorded
+        .record_shade(scene.camera().eye, &mut encoder)
+        .unwrap()
+        .clone();
+    ctx.submit_and_wait([encoder.finish()]).unwrap();
+    let values: Vec<glam::Vec4> = ctx.read_buffer(&buffer, 0, expected.len()).unwrap();
+    for (v, e) in values.iter().zip(&expected) {
+        assert_relative_eq!(v.truncate(), *e, epsilon = 1e-5);
+    }
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let texture = recorded
+        .record_render(scene.camera(), &mut encoder)
+        .unwrap()
+        .clone();
+    ctx.submit_and_wait([encoder.finish()]).unwrap();
+    let texels: Vec<[f32; 4]> = ctx.read_texture(&texture).unwrap();
+    for (t, p) in texels.iter().zip(&image.pixels) {
+        assert_relative_eq!(Vec3::new(t[0], t[1], t[2]), *p, epsilon = 1e-5);
+    }
+}
+
+#[test]
+fn what_it_cannot_do_is_refused_clearly() {
+    use shadow_core::{Capability, Error};
+    let Some(ctx) = test_context() else { return };
+    let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    assert!(matches!(method.shade(Vec3::ZERO), Err(Error::Stage { .. })));
+    // A deforming mesh.
+    let ball = Arc::new(shapes::uv_sphere("ball", Vec3::ZERO, 0.5, 8, 16).unwrap());
+    let squashed: Arc<[Vec3]> = ball
+        .positions()
+        .iter()
+        .map(|p| *p * Vec3::new(1.0, 0.5, 1.0))
+        .collect();
+    let deforming = Scene::new(
+        "squash",
+        vec![Object {
+            mesh: Arc::clone(&ball),
+            material: white(),
+        }],
+        vec![Frame {
+            time: 0.0,
+            poses: vec![Pose::Deformed {
+                positions: squashed,
+                normals: None,
+            }],
+        }],
+        camera(),
+    )
+    .unwrap();
+    assert!(matches!(
+        method.prepare(&deforming),
+        Err(Error::Unsupported {
+            capability: Capability::DeformingMeshes,
+            ..
+        })
+    ));
+    // An uneven scale changes self-shadowing.
+    let stretched = Scene::new(
+        "stretch",
+        vec![Object {
+            mesh: ball,
+            material: white(),
+        }],
+        vec![Frame {
+            time: 0.0,
+            poses: vec![Pose::Rigid(Affine3A::from_scale(Vec3::new(1.0, 2.0, 1.0)))],
+        }],
+        camera(),
+    )
+    .unwrap();
+    assert!(matches!(
+        method.prepare(&stretched),
+        Err(Error::InvalidScene(_))
+    ));
+    // Settings out of range.
+    for config in [
+        Config {
+            lights: 0,
+            ..Config::default()
+        },
+        Config {
+            map_resolution: 1024,
+            ..Config::default()
+        },
+        Config {
+            rays: 1,
+            ..Config::default()
+        },
+    ] {
+        assert!(matches!(
+            DeferredShadow::new(Arc::clone(&ctx), config),
+            Err(Error::InvalidConfig { .. })
+        ));
+    }
+}
+
+/// Objects passing through each other, and an occluder under its receiver:
+/// finite radiance in [0, L_s].
+#[test]
+fn interpenetrating_objects_give_bounded_radiance() {
+    let Some(ctx) = test_context() else { return };
+    let a = shapes::uv_sphere("a", Vec3::new(0.0, 0.5, 0.0), 0.5, 12, 24).unwrap();
+    let b = shapes::uv_sphere("b", Vec3::new(0.3, 0.6, 0.0), 0.4, 12, 24).unwrap();
+    let below = shapes::floor("below", Vec3::new(0.0, -0.5, 0.0), 1.0, 4).unwrap();
+    let objects = [a, b, below]
+        .into_iter()
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: white(),
+        })
+        .collect();
+    let scene = Scene::still("overlap", objects, camera()).unwrap();
+    let mut method = DeferredShadow::new(ctx, Config::default()).unwrap();
+    run(&mut method, &scene, &patchy());
+    let shaded = method.shade(scene.camera().eye).unwrap();
+    assert!(
+        shaded
+            .flat()
+            .all(|v| v.is_finite() && v.min_element() >= 0.0)
+    );
+    let image = method.render(scene.camera()).unwrap();
+    assert!(
+        image
+            .pixels
+            .iter()
+            .all(|p| p.is_finite() && p.min_element() >= 0.0)
+    );
+}
