@@ -13,7 +13,7 @@ use std::sync::Arc;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use shadow_core::{
-    Brdf, Camera,
+    Brdf, Camera, Result,
     gpu::{
         GpuContext,
         uniforms::{Slots, dynamic_uniform, storage, uniform},
@@ -22,7 +22,7 @@ use shadow_core::{
 };
 
 use crate::config::MAX_LIGHTS;
-use crate::maps::{GpuLight, Plan};
+use crate::maps::{GpuLight, MapWindow, Plan};
 
 /// `Object` in the shaders.
 #[repr(C)]
@@ -799,6 +799,38 @@ impl Gpu {
         pass.set_pipeline(&self.pixels);
         pass.set_bind_group(0, &group, &[offset]);
         pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+    }
+
+    /// Runs every pipeline once on stand-in data (one map of the first
+    /// object, a 4×4 image), so that a driver that compiles shaders on
+    /// first use (Mesa's lavapipe does) does so now and not in the first
+    /// frame. Leaves no maps planned.
+    pub fn warm_up(&mut self) -> Result<()> {
+        let plan = Plan {
+            maps: vec![MapWindow {
+                centre: glam::Vec2::ZERO,
+                inverse_side: 1.0,
+                blur: 1.5,
+                light: 0,
+                occluder: 0,
+                receiver: 0,
+                _pad: 0,
+            }],
+            ranges: vec![[0, 1]],
+        };
+        self.set_plan(&plan, &[0]);
+        self.set_shading(&vec![0.0; 4 * self.vertex_count as usize]);
+        let camera = Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 4, 4)?;
+        let ctx = Arc::clone(&self.ctx);
+        ctx.run("deferred-shadow: warm-up", |encoder| {
+            self.record_maps(encoder);
+            self.record_vertices(encoder, Vec3::Z);
+            self.record_image(encoder, &camera, 0.1);
+            Ok(())
+        })?;
+        self.batches.clear();
+        self.map_count = 0;
+        Ok(())
     }
 
     /// One `vec4` per vertex: radiance, and 1 in w.

@@ -102,9 +102,23 @@ impl DeferredShadow {
     /// The method on `ctx`'s device; fails on a configuration out of range.
     pub fn new(ctx: Arc<GpuContext>, config: Config) -> Result<DeferredShadow> {
         config.check()?;
-        let mut name = format!("{NAME}-q{}-map{}", config.lights, config.map_resolution);
+        // The name says what differs from the default.
+        let default = Config::default();
+        let mut name = NAME.to_string();
+        if config.lights != default.lights {
+            name += &format!("-q{}", config.lights);
+        }
+        if config.map_resolution != default.map_resolution {
+            name += &format!("-map{}", config.map_resolution);
+        }
+        if config.rays != default.rays {
+            name += &format!("-rays{}", config.rays);
+        }
+        if config.grouping != default.grouping {
+            name += "-grouped";
+        }
         if !config.self_visibility {
-            name.push_str("-uncorrected");
+            name += "-uncorrected";
         }
         Ok(DeferredShadow {
             ctx,
@@ -568,6 +582,7 @@ impl ShadowMethod for DeferredShadow {
             start.elapsed().as_secs_f64(),
         );
         let mut gpu = gpu;
+        gpu.warm_up()?;
         if let Some(lit) = &self.lit {
             gpu.set_lights(&lit.gpu);
         }

@@ -84,6 +84,14 @@ pub const METHODS: &[(&str, &str)] = &[
         "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified while their surface moves by at most a texel of the depth maps; simplified=TEXELS for another bound)",
     ),
     (
+        "deferred-shadow",
+        "Tamura et al.: per-vertex precomputed self-shadowing plus per-pixel shadows from other objects through occlusion maps (32 area lights, 64² maps) on the GPU; options after ':' (e.g. deferred-shadow:q=64:map=128)",
+    ),
+    (
+        "deferred-shadow:q=N",
+        "N area lights (1..=256); more options: map=N (occlusion map side), rays=N (precomputation rays per vertex), uncorrected (no self-visibility correction of the occlusion, eq. 4 instead of eq. 8)",
+    ),
+    (
         "raytrace:N",
         "Monte-Carlo ray tracing, N MIS iterations per vertex and per pixel (e.g. raytrace:16)",
     ),
@@ -101,6 +109,8 @@ pub const REPORT_METHODS: &[&str] = &[
     "hemi-raster:pvs",
     "occlusion-query",
     "occlusion-query:simplified",
+    "deferred-shadow",
+    "deferred-shadow:map=128",
     "raytrace:4",
     "raytrace:16",
     "raytrace:64",
@@ -112,6 +122,13 @@ pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
     if let Some(options) = name.strip_prefix("occlusion-query") {
         let config = occlusion_query_config(name, options)?;
         return Ok(Box::new(OcclusionQuery::new(gpu.get()?, config)?));
+    }
+    if let Some(options) = name.strip_prefix("deferred-shadow") {
+        let config = deferred_shadow_config(name, options)?;
+        return Ok(Box::new(deferred_shadow::DeferredShadow::new(
+            gpu.get()?,
+            config,
+        )?));
     }
     if name == "unshadowed" {
         let order = ShOrder::new(9).expect("9 is a valid SH order");
@@ -205,6 +222,35 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
     Ok(config)
 }
 
+/// The configuration `deferred-shadow` followed by `options` names.
+fn deferred_shadow_config(name: &str, options: &str) -> Result<deferred_shadow::Config> {
+    let mut config = deferred_shadow::Config::default();
+    let bad = |what: String| Err(Error::config(name, what));
+    let mut options = options.split(':');
+    if options.next() != Some("") {
+        return bad("options follow the name after ':'".into());
+    }
+    for option in options {
+        let number = |value: &str| {
+            value
+                .parse::<u32>()
+                .map_err(|_| Error::config(name, format!("{option}: not a whole number")))
+        };
+        match option.split_once('=') {
+            None if option == "uncorrected" => config.self_visibility = false,
+            Some(("q", q)) => config.lights = number(q)? as usize,
+            Some(("map", n)) => config.map_resolution = number(n)?,
+            Some(("rays", n)) => config.rays = number(n)?,
+            _ => {
+                return bad(format!(
+                    "unknown option {option:?}; options are q=N, map=N, rays=N, uncorrected"
+                ));
+            }
+        }
+    }
+    Ok(config)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -220,7 +266,10 @@ mod tests {
             assert!(by_name(name).is_ok(), "{name}");
         }
         for (name, _) in METHODS {
-            let name = name.replace("k=N", "k=66").replace(":N", ":8");
+            let name = name
+                .replace("k=N", "k=66")
+                .replace("q=N", "q=16")
+                .replace(":N", ":8");
             assert!(by_name(&name).is_ok(), "{name}");
         }
         assert_eq!(
@@ -234,6 +283,9 @@ mod tests {
             "occlusion-query:map=x",
             "occlusion-query:fast",
             "occlusion-queryx",
+            "deferred-shadow:q=0",
+            "deferred-shadow:map=x",
+            "deferred-shadow:fast",
         ] {
             let err = by_name(bad).err().unwrap();
             assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");

@@ -8,6 +8,11 @@
 //! ([`StageTimes::image_frame`]); relighting is timed apart. Every stage has
 //! finished its work when it returns (GPU methods wait for their queue), so
 //! the wall clock around a stage is the stage's time.
+//!
+//! `update` is timed on its first call for each frame: a repeated call with
+//! the same geometry may find nothing to redo (a method that keeps its
+//! visibility while nothing moves), which is not what a new frame costs.
+//! Shading, rendering and relighting are timed as medians over repeats.
 
 use std::time::{Duration, Instant};
 
@@ -25,7 +30,8 @@ use crate::{
 /// Seconds of stage time per frame after which repeats stop.
 pub const REPEAT_BUDGET: f64 = 2.0;
 
-/// Median wall-clock seconds of each stage over the repeats.
+/// Wall-clock seconds of each stage: the first update of the frame, medians
+/// of the others over the repeats.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimes {
     pub prepare: f64,
@@ -203,7 +209,10 @@ pub fn run_inspecting(
             if !update.is_empty() && started.elapsed().as_secs_f64() > REPEAT_BUDGET {
                 break;
             }
-            update.push(timed(|| method.update(&geometry, camera))?);
+            let updated = timed(|| method.update(&geometry, camera))?;
+            if update.is_empty() {
+                update.push(updated);
+            }
             let start = Instant::now();
             shading = Some(method.shade(camera.eye)?);
             shade.push(start.elapsed());
@@ -212,7 +221,12 @@ pub fn run_inspecting(
                 image = Some(method.render(image_camera)?);
                 render.push(start.elapsed());
             }
-            profiles.push(method.profile().of_stages(|s| s != Stage::Relight));
+            let profile = method.profile();
+            if profiles.is_empty() {
+                profiles.push(profile.of_stages(|s| s != Stage::Relight));
+            } else {
+                profiles.push(profile.of_stages(|s| s != Stage::Relight && s != Stage::Update));
+            }
         }
         if index == 0 {
             let mut times = Vec::new();
