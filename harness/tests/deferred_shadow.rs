@@ -1,0 +1,266 @@
+//! deferred-shadow against the Monte-Carlo reference: per-pixel shadows
+//! against the per-vertex methods on the bunny's coarse floor, the
+//! self-visibility correction of §4.2.4, overlapping occluders, and the
+//! occlusion-map resolution against the number of lights.
+
+use std::sync::Arc;
+
+use deferred_shadow::{Config, DeferredShadow};
+use glam::Vec3;
+use harness::{
+    methods::{SharedGpu, by_name},
+    reference::{self, ImageReference, ReferenceSettings},
+    scenes,
+    score::{self, ErrorStats},
+};
+use indicatif::ProgressBar;
+use shadow_core::{
+    Camera, Environment, Object, Scene, ShadowMethod,
+    gpu::{GpuContext, test_context},
+    shapes,
+};
+
+/// Images this wide in the tests (the report uses 160, the benches 512).
+const WIDTH: u32 = 128;
+
+fn image_reference(scene: &Scene, env: &Environment, camera: &Camera) -> ImageReference {
+    let settings = ReferenceSettings {
+        target_noise: Some(0.015),
+        ..ReferenceSettings::IMAGE
+    };
+    reference::pixel_reference(
+        scene,
+        &scene.frame_geometry(0).unwrap(),
+        env,
+        camera,
+        &settings,
+        &ProgressBar::hidden(),
+    )
+    .unwrap()
+}
+
+/// `method`'s image of frame 0 scored against `reference`.
+fn image_error(
+    method: &mut dyn ShadowMethod,
+    scene: &Scene,
+    env: &Environment,
+    camera: &Camera,
+    reference: &ImageReference,
+) -> ErrorStats {
+    method.prepare(scene).unwrap();
+    method.relight(env).unwrap();
+    method
+        .update(&scene.frame_geometry(0).unwrap(), camera)
+        .unwrap();
+    let image = method.render(camera).unwrap();
+    score::image(&image, reference).unwrap()
+}
+
+fn deferred(ctx: &Arc<GpuContext>, config: Config) -> DeferredShadow {
+    DeferredShadow::new(Arc::clone(ctx), config).unwrap()
+}
+
+/// The paper's argument (§3): a contact shadow on a two-triangle floor is
+/// lost by every per-vertex method, interpolating between the floor's four
+/// corners, and drawn per pixel by the occlusion maps.
+#[test]
+fn on_the_bunny_per_pixel_shadows_beat_every_per_vertex_method() {
+    let Some(ctx) = test_context() else { return };
+    let scene = scenes::builtin("bunny").unwrap();
+    let env = scenes::environment("courtyard").unwrap();
+    let camera = scene.camera().with_width(WIDTH).unwrap();
+    let reference = image_reference(&scene, &env, &camera);
+    let gpu = SharedGpu::with(Arc::clone(&ctx));
+    let ours = image_error(
+        &mut deferred(&ctx, Config::default()),
+        &scene,
+        &env,
+        &camera,
+        &reference,
+    )
+    .relative_l2;
+    println!("deferred-shadow: {:.2}%", 100.0 * ours);
+    for name in ["hemi-raster", "occlusion-query", "raytrace:64:vertex"] {
+        let mut method = by_name(name, &gpu).unwrap();
+        let theirs = image_error(method.as_mut(), &scene, &env, &camera, &reference).relative_l2;
+        println!("{name}: {:.2}%", 100.0 * theirs);
+        assert!(
+            ours < 0.5 * theirs,
+            "{name}: {theirs} against deferred-shadow's {ours}"
+        );
+    }
+    assert!(ours < 0.06, "{ours}");
+}
+
+/// A deep cup beside a tall block: from inside the cup, the low lights on
+/// the block's side are hidden by the cup's own wall and by the block
+/// (§4.2.4). Without eq. 7's factor v_s they are taken away twice.
+#[test]
+fn the_self_visibility_factor_stops_double_counting() {
+    let Some(ctx) = test_context() else { return };
+    let profile = [
+        glam::Vec2::new(0.0, 0.0),
+        glam::Vec2::new(0.35, 0.0),
+        glam::Vec2::new(0.35, 0.6),
+        glam::Vec2::new(0.3, 0.6),
+        glam::Vec2::new(0.3, 0.05),
+        glam::Vec2::new(0.0, 0.05),
+    ];
+    let cup = shapes::lathe("cup", &profile, 32).unwrap();
+    let lid = shapes::cuboid(
+        "block",
+        Vec3::new(0.45, 0.0, -0.6),
+        Vec3::new(0.7, 1.0, 0.6),
+        false,
+    )
+    .unwrap();
+    let camera = Camera::new(
+        Vec3::new(-0.3, 2.0, 0.4),
+        Vec3::new(0.0, 0.1, 0.0),
+        Vec3::Y,
+        0.5,
+        WIDTH,
+        96,
+    )
+    .unwrap();
+    let objects = [cup, lid]
+        .into_iter()
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: scenes::white(),
+        })
+        .collect();
+    let scene = Scene::still("cup under a lid", objects, camera.clone()).unwrap();
+    let env = Environment::uniform(Vec3::ONE);
+    let reference = image_reference(&scene, &env, &camera);
+    let corrected = image_error(
+        &mut deferred(&ctx, Config::default()),
+        &scene,
+        &env,
+        &camera,
+        &reference,
+    );
+    let uncorrected = image_error(
+        &mut deferred(
+            &ctx,
+            Config {
+                self_visibility: false,
+                ..Config::default()
+            },
+        ),
+        &scene,
+        &env,
+        &camera,
+        &reference,
+    );
+    println!(
+        "with eq. 7's v_s: {:.2}%; without: {:.2}%",
+        100.0 * corrected.relative_l2,
+        100.0 * uncorrected.relative_l2
+    );
+    assert!(
+        corrected.relative_l2 < 0.8 * uncorrected.relative_l2,
+        "{corrected:?} {uncorrected:?}"
+    );
+}
+
+/// Two balls whose shadows overlap on a floor: each casts through its own
+/// map, and the product of visibilities (Soler and Sillion) combines them
+/// about as well as one ball's shadow alone is drawn.
+#[test]
+fn overlapping_occluders_combine_as_a_product_of_visibilities() {
+    let Some(ctx) = test_context() else { return };
+    let floor = || shapes::floor("floor", Vec3::ZERO, 1.5, 1).unwrap();
+    let ball = |x: f32| shapes::uv_sphere("ball", Vec3::new(x, 0.45, 0.0), 0.3, 16, 32).unwrap();
+    let camera = Camera::new(
+        Vec3::new(0.0, 2.5, 2.0),
+        Vec3::new(0.0, 0.2, 0.0),
+        Vec3::Y,
+        0.8,
+        WIDTH,
+        96,
+    )
+    .unwrap();
+    let scene = |meshes: Vec<shadow_core::Mesh>| {
+        let objects = meshes
+            .into_iter()
+            .map(|mesh| Object {
+                mesh: Arc::new(mesh),
+                material: scenes::white(),
+            })
+            .collect();
+        Scene::still("balls", objects, camera.clone()).unwrap()
+    };
+    let env = scenes::environment("courtyard").unwrap();
+    let mut errors = Vec::new();
+    for meshes in [
+        vec![floor(), ball(0.0)],
+        vec![floor(), ball(-0.2), ball(0.25)],
+    ] {
+        let scene = scene(meshes);
+        let reference = image_reference(&scene, &env, &camera);
+        let mut method = deferred(&ctx, Config::default());
+        let error = image_error(&mut method, &scene, &env, &camera, &reference);
+        errors.push(error.relative_l2);
+    }
+    println!(
+        "one ball: {:.2}%, two overlapping: {:.2}%",
+        100.0 * errors[0],
+        100.0 * errors[1]
+    );
+    assert!(errors[1] < 1.5 * errors[0] + 0.01, "{errors:?}");
+}
+
+/// §7.1's finding, checked on the bunny: the error for 16, 32 and 64 lights
+/// and maps of 32², 64² and 128².
+#[test]
+fn map_resolution_against_the_number_of_lights() {
+    let Some(ctx) = test_context() else { return };
+    let scene = scenes::builtin("bunny").unwrap();
+    let env = scenes::environment("courtyard").unwrap();
+    let camera = scene.camera().with_width(WIDTH).unwrap();
+    let reference = image_reference(&scene, &env, &camera);
+    let mut table = Vec::new();
+    for lights in [16, 32, 64] {
+        let row: Vec<f32> = [32, 64, 128]
+            .into_iter()
+            .map(|map_resolution| {
+                let config = Config {
+                    lights,
+                    map_resolution,
+                    ..Config::default()
+                };
+                let mut method = deferred(&ctx, config);
+                image_error(&mut method, &scene, &env, &camera, &reference).relative_l2
+            })
+            .collect();
+        println!(
+            "q = {lights}: maps 32², 64², 128²: {:.2}% {:.2}% {:.2}%",
+            100.0 * row[0],
+            100.0 * row[1],
+            100.0 * row[2]
+        );
+        table.push(row);
+    }
+    assert!(table[2][2] < table[0][0], "{table:?}");
+}
+
+/// The white furnace through the harness's own scene.
+#[test]
+fn the_furnace_scene_gives_the_albedo() {
+    let Some(ctx) = test_context() else { return };
+    let scene = scenes::builtin("furnace").unwrap();
+    let mut method = deferred(&ctx, Config::default());
+    method.prepare(&scene).unwrap();
+    method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
+    method
+        .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+        .unwrap();
+    let shaded = method.shade(scene.camera().eye).unwrap();
+    for (object, values) in scene.objects().iter().zip(&shaded.radiance) {
+        let rho = object.material.diffuse();
+        for v in values {
+            assert!((*v - rho).abs().max_element() < 2e-3, "{v} against {rho}");
+        }
+    }
+}
