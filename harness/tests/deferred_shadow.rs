@@ -107,7 +107,7 @@ fn the_self_visibility_factor_stops_double_counting() {
         glam::Vec2::new(0.0, 0.05),
     ];
     let cup = shapes::lathe("cup", &profile, 32).unwrap();
-    let lid = shapes::cuboid(
+    let block = shapes::cuboid(
         "block",
         Vec3::new(0.45, 0.0, -0.6),
         Vec3::new(0.7, 1.0, 0.6),
@@ -123,14 +123,14 @@ fn the_self_visibility_factor_stops_double_counting() {
         96,
     )
     .unwrap();
-    let objects = [cup, lid]
+    let objects = [cup, block]
         .into_iter()
         .map(|mesh| Object {
             mesh: Arc::new(mesh),
             material: scenes::white(),
         })
         .collect();
-    let scene = Scene::still("cup under a lid", objects, camera.clone()).unwrap();
+    let scene = Scene::still("cup beside a block", objects, camera).unwrap();
     let env = Environment::uniform(Vec3::ONE);
     let reference = image_reference(&scene, &env, &camera);
     let corrected = image_error(
@@ -189,7 +189,7 @@ fn overlapping_occluders_combine_as_a_product_of_visibilities() {
                 material: scenes::white(),
             })
             .collect();
-        Scene::still("balls", objects, camera.clone()).unwrap()
+        Scene::still("balls", objects, camera).unwrap()
     };
     let env = scenes::environment("courtyard").unwrap();
     let mut errors = Vec::new();
