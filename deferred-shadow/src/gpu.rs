@@ -35,7 +35,8 @@ pub struct GpuObject {
 }
 
 impl GpuObject {
-    pub fn new(model: Mat4, material: &Brdf) -> GpuObject {
+    /// An object of occluder group `group`.
+    pub fn new(model: Mat4, material: &Brdf, group: u32) -> GpuObject {
         let (diffuse, specular) = match *material {
             Brdf::Lambert { albedo } => (albedo.extend(0.0), Vec4::ZERO),
             Brdf::Phong {
@@ -48,7 +49,7 @@ impl GpuObject {
         GpuObject {
             model,
             normal,
-            diffuse,
+            diffuse: diffuse.truncate().extend(group as f32),
             specular,
         }
     }

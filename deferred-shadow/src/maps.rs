@@ -1,22 +1,28 @@
 //! Which occlusion maps a frame needs, where each lies and how much it is
 //! blurred (§4.2.2, eq. 5–6), planned on the CPU; the GPU renders and blurs
-//! them (`raster.rs`).
+//! them (`gpu.rs`).
 //!
 //! For light i, occluder group A and receiver B, A's shadow is projected
-//! along ω_i onto the plane H_B through B's centre. The map is a square
-//! window of that plane around B's projected bounding sphere, in the light's
-//! frame (u_i, v_i, ω_i), so that a point p of B reads its map at
-//! (p·u_i, p·v_i): the orthogonal projection of §6.2.2. The coverage is
-//! convolved with a box of side s = √Ω_i · D, D = (c_A − c_B)·ω_i the
-//! distance from H_B to A's plane H_A; the window is widened by s/2 on each
-//! side so that occluders just outside B's footprint still blur into it.
+//! along ω_i onto the plane H_B through B's centre, and a point p of B reads
+//! it at (p·u_i, p·v_i): the orthogonal projection of §6.2.2, in the
+//! light's frame (u_i, v_i, ω_i). The coverage is convolved with a box of
+//! side s = √Ω_i · D, D = (c_A − c_B)·ω_i the distance from H_B to A's plane
+//! H_A. Receivers are groups too (§4.2.3): the two colours of a board share
+//! their maps.
+//!
+//! The paper sizes a map to its receiver. Here a map covers the smaller of
+//! two squares: the receiver's projected bounding sphere widened by s/2, or
+//! the occluder's widened by s/2, outside which the blurred shadow is zero.
+//! A small piece over a large board then gets its texels where its shadow
+//! falls instead of spreading them over the whole board; points outside the
+//! window read zero.
 //!
 //! A pair whose occluder plane is not nearer the light than the receiver's
 //! (D ≤ 0: the occluder lies behind the receiver, as seen from the light)
 //! casts nothing: the plane approximation cannot say which part of B it
 //! shades, and the common case is a floor under an object, which must not
 //! darken the object for lights above. Pairs whose blurred shadow cannot
-//! reach the window are skipped.
+//! reach the receiver are skipped.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3, Vec4};
@@ -64,17 +70,17 @@ pub struct MapWindow {
     pub light: u32,
     /// The occluder group.
     pub occluder: u32,
-    /// The receiving object.
+    /// The receiving group.
     pub receiver: u32,
     pub _pad: u32,
 }
 
-/// Every map of a frame, sorted by receiver and then light, with the range
-/// of maps each (receiver, light) reads.
+/// Every map of a frame, sorted by receiving group and then light, with the
+/// range of maps each (receiver, light) reads.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Plan {
     pub maps: Vec<MapWindow>,
-    /// `[first, count]` of receiver b and light i at `b * q + i`.
+    /// `[first, count]` of receiving group b and light i at `b * q + i`.
     pub ranges: Vec<[u32; 2]>,
 }
 
@@ -84,26 +90,26 @@ fn sphere(b: &Aabb) -> (Vec3, f32) {
 }
 
 impl Plan {
-    /// The maps of receivers with bounds `objects` under `lights`, cast by
-    /// `groups`, at `resolution` texels a side.
+    /// The maps between the groups of objects with bounds `objects` under
+    /// `lights`, at `resolution` texels a side.
     pub fn new(lights: &[GpuLight], objects: &[Aabb], groups: &Groups, resolution: u32) -> Plan {
         let q = lights.len();
-        let occluders: Vec<(Vec3, f32)> = groups
+        let spheres: Vec<(Vec3, f32)> = groups
             .members
             .iter()
             .map(|m| sphere(&m.iter().map(|&o| objects[o]).fold(Aabb::EMPTY, Aabb::union)))
             .collect();
         let mut plan = Plan {
             maps: Vec::new(),
-            ranges: vec![[0, 0]; objects.len() * q],
+            ranges: vec![[0, 0]; groups.len() * q],
         };
-        for (b, bounds) in objects.iter().enumerate() {
-            let (centre, radius) = sphere(bounds);
+        for (b, &(centre, radius)) in spheres.iter().enumerate() {
             for (i, light) in lights.iter().enumerate() {
                 let first = plan.maps.len() as u32;
                 let omega = light.omega();
-                for (g, &(occluder, occluder_radius)) in occluders.iter().enumerate() {
-                    if groups.of_object[b] == g as u32 {
+                let (u, v) = (light.u.truncate(), light.v.truncate());
+                for (a, &(occluder, occluder_radius)) in spheres.iter().enumerate() {
+                    if a == b {
                         continue;
                     }
                     let offset = occluder - centre;
@@ -112,20 +118,21 @@ impl Plan {
                         continue;
                     }
                     let side = light.direction.w.sqrt() * distance;
-                    let half = radius + 0.5 * side;
                     let apart = (offset - distance * omega).length();
-                    if apart > occluder_radius + std::f32::consts::SQRT_2 * (half + 0.5 * side) {
+                    if apart > occluder_radius + radius + side {
                         continue;
                     }
+                    let (middle, half) = if occluder_radius < radius {
+                        (occluder, occluder_radius + 0.5 * side)
+                    } else {
+                        (centre, radius + 0.5 * side)
+                    };
                     plan.maps.push(MapWindow {
-                        centre: Vec2::new(
-                            centre.dot(light.u.truncate()),
-                            centre.dot(light.v.truncate()),
-                        ),
+                        centre: Vec2::new(middle.dot(u), middle.dot(v)),
                         inverse_side: 1.0 / (2.0 * half),
                         blur: side / (2.0 * half) * resolution as f32,
                         light: i as u32,
-                        occluder: g as u32,
+                        occluder: a as u32,
                         receiver: b as u32,
                         _pad: 0,
                     });
@@ -173,12 +180,21 @@ mod tests {
         assert_eq!(plan.ranges, vec![[0, 1], [1, 0], [1, 0], [1, 1]]);
         let map = plan.maps[0];
         assert_eq!((map.light, map.occluder, map.receiver), (0, 1, 0));
-        // s = √Ω · D with D = 0.5; the window is the floor's sphere widened
-        // by s/2 each side.
+        // s = √Ω · D with D = 0.5; the window is the ball's sphere (smaller
+        // than the floor's) widened by s/2 each side, around the ball.
         let s = 0.1f32.sqrt() * 0.5;
-        let side = 2.0 * 2.0f32.sqrt() + s;
+        let side = 2.0 * 0.2 * 3.0f32.sqrt() + s;
         approx::assert_relative_eq!(map.inverse_side, 1.0 / side, max_relative = 1e-5);
         approx::assert_relative_eq!(map.blur, s / side * 64.0, max_relative = 1e-5);
+        let ball = Vec3::new(0.0, 0.5, 0.0);
+        let at = Vec2::new(
+            ball.dot(lights[0].u.truncate()),
+            ball.dot(lights[0].v.truncate()),
+        );
+        approx::assert_relative_eq!(map.centre, at, epsilon = 1e-6);
+        // The ball's window under the floor's shadow is the ball's own.
+        let below = plan.maps[1];
+        assert_eq!((below.light, below.occluder, below.receiver), (1, 0, 1));
     }
 
     #[test]

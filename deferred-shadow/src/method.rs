@@ -338,7 +338,8 @@ impl DeferredShadow {
             .parts
             .iter()
             .zip(&posed.transforms)
-            .map(|(part, t)| GpuObject::new(Mat4::from(*t), &part.material))
+            .zip(&scene.groups.of_object)
+            .map(|((part, t), &g)| GpuObject::new(Mat4::from(*t), &part.material, g))
             .collect();
         scene.gpu.set_objects(&objects);
         Ok(())
@@ -564,7 +565,8 @@ impl ShadowMethod for DeferredShadow {
         let objects: Vec<GpuObject> = parts
             .iter()
             .zip(&transforms)
-            .map(|(part, t)| GpuObject::new(Mat4::from(*t), &part.material))
+            .zip(&groups.of_object)
+            .map(|((part, t), &g)| GpuObject::new(Mat4::from(*t), &part.material, g))
             .collect();
         let ctx = Arc::clone(&self.ctx);
         let gpu = ctx.capture("deferred-shadow: pipelines", || {

@@ -23,7 +23,8 @@ struct Map {
     pad: u32,
 }
 
-// An object's pose and material (specular.w: the Phong exponent).
+// An object's pose and material (diffuse.w: its group, exact in f32;
+// specular.w: the Phong exponent).
 struct Object {
     model: mat4x4<f32>,
     normal: mat4x4<f32>,

@@ -50,7 +50,8 @@ fn weight(v: u32, i: u32) -> f32 {
     return shading[v * params.stride + 4u + i];
 }
 
-// O_i(p) for receiver `receiver`: every group's map, bilinear, combined.
+// O_i(p) for receiving group `receiver`: every occluder group's map,
+// bilinear, zero outside its window, combined.
 fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light) -> f32 {
     let range = ranges[receiver * params.lights + i];
     let n = params.resolution;
@@ -58,7 +59,11 @@ fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light) -> f32 {
     var visible = 1.0;
     for (var k = range.x; k < range.x + range.y; k++) {
         let m = maps[k];
-        let t = clamp((a - m.centre) * m.inverse_side * f32(n) + 0.5 * f32(n) - 0.5, vec2<f32>(0.0), vec2<f32>(f32(n - 1u)));
+        let uv = (a - m.centre) * m.inverse_side + 0.5;
+        if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+            continue;
+        }
+        let t = clamp(uv * f32(n) - 0.5, vec2<f32>(0.0), vec2<f32>(f32(n - 1u)));
         let t0 = vec2<u32>(floor(t));
         let t1 = min(t0 + 1u, vec2<u32>(n - 1u));
         let f = t - floor(t);
@@ -85,12 +90,13 @@ fn brdf(o: Object, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
 // weighted by `bary`.
 fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u32>, bary: vec3<f32>) -> vec3<f32> {
     let o = objects[object];
+    let receiver = u32(o.diffuse.w);
     let wo = normalize(params.eye.xyz - p);
     let q = params.lights;
     var lost = vec3<f32>(0.0);
     for (var i = 0u; i < q; i++) {
         let light = lights[i];
-        let occluded = occlusion(object, i, p, light);
+        let occluded = occlusion(receiver, i, p, light);
         var w = max(dot(n, light.direction.xyz), 0.0);
         if params.self_visibility != 0u {
             w = bary.x * weight(corners.x, i) + bary.y * weight(corners.y, i) + bary.z * weight(corners.z, i);
