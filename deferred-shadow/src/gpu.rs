@@ -95,6 +95,7 @@ pub struct Geometry {
 /// tiles.
 #[derive(Clone, Debug, Default, PartialEq)]
 struct Batch {
+    /// Its first entry in the list of drawn maps.
     first: u32,
     count: u32,
     /// (object, first instance, instance count): the object drawn into the
@@ -177,6 +178,8 @@ pub struct Gpu {
 
     vertices: wgpu::Buffer,
     triangles: wgpu::Buffer,
+    /// The triangles' global vertex indices, for indexed draws.
+    indices: wgpu::Buffer,
     triangle_ranges: Vec<std::ops::Range<u32>>,
     vertex_count: u32,
     objects: wgpu::Buffer,
@@ -185,6 +188,12 @@ pub struct Gpu {
     ranges: Growing,
     instances: Growing,
     blurred: Growing,
+    /// The previous frame's maps, from which kept maps are copied.
+    previous: Growing,
+    /// (previous index, index, count) of each run of kept maps.
+    copies: Vec<(u32, u32, u32)>,
+    /// The maps drawn, tile after tile.
+    drawn: Growing,
     rows: Growing,
     shading: Growing,
     vertex_radiance: wgpu::Buffer,
@@ -299,7 +308,6 @@ impl Gpu {
             &[
                 dynamic_uniform(0, vertex),
                 storage(1, true, vertex),
-                storage(2, true, vertex),
                 storage(3, true, vertex),
                 uniform(4, vertex),
                 storage(5, true, vertex),
@@ -338,6 +346,7 @@ impl Gpu {
                 texture_entry(7, wgpu::TextureSampleType::Float { filterable: false }, cs),
                 storage(8, false, cs),
                 storage(9, false, cs),
+                storage(10, true, cs),
             ],
         );
         let blur_rows = compute(c, &blur_layout, &maps_module, "blur_rows");
@@ -422,6 +431,15 @@ impl Gpu {
         Gpu {
             vertices: c.create_buffer_init("vertices", &geometry.vertices, storage_usage),
             triangles: c.create_buffer_init("triangles", &geometry.triangles, storage_usage),
+            indices: c.create_buffer_init(
+                "indices",
+                &geometry
+                    .triangles
+                    .iter()
+                    .flat_map(|t| [t[0], t[1], t[2]])
+                    .collect::<Vec<u32>>(),
+                wgpu::BufferUsages::INDEX,
+            ),
             triangle_ranges: geometry.triangle_ranges.clone(),
             vertex_count,
             objects: c.create_buffer_init(
@@ -437,7 +455,18 @@ impl Gpu {
             maps: Growing::new(c, "maps", storage_usage),
             ranges: Growing::new(c, "map ranges", storage_usage),
             instances: Growing::new(c, "map instances", storage_usage),
-            blurred: Growing::new(c, "occlusion maps", storage_usage),
+            blurred: Growing::new(
+                c,
+                "occlusion maps",
+                storage_usage | wgpu::BufferUsages::COPY_SRC,
+            ),
+            previous: Growing::new(
+                c,
+                "previous occlusion maps",
+                storage_usage | wgpu::BufferUsages::COPY_SRC,
+            ),
+            copies: Vec::new(),
+            drawn: Growing::new(c, "maps drawn", storage_usage),
             rows: Growing::new(c, "blurred rows", storage_usage),
             shading: Growing::new(c, "vertex shading", storage_usage),
             vertex_radiance: buffer(
@@ -499,7 +528,7 @@ impl Gpu {
     /// Takes `plan` for the next [`Gpu::record_maps`]: uploads its windows
     /// and ranges and lays its maps out in atlas batches. `groups[o]` is the
     /// group of object o.
-    pub fn set_plan(&mut self, plan: &Plan, groups: &[u32]) {
+    pub fn set_plan(&mut self, plan: &Plan, groups: &[u32], reuse: &[Option<u32>]) {
         let n = self.resolution;
         let limit = self
             .ctx
@@ -511,27 +540,40 @@ impl Gpu {
         let capacity = (per_row * per_row).min(MAX_DISPATCH);
         let count = plan.maps.len() as u32;
         self.map_count = count;
-        self.maps.write(&self.ctx, &plan.maps);
-        self.ranges.write(&self.ctx, &plan.ranges);
         let n2 = (n * n) as u64;
+        // Kept maps are copied from the previous frame's array, runs of
+        // consecutive maps in one copy each.
+        self.copies.clear();
+        for (k, old) in (0..count).zip(reuse) {
+            let Some(old) = *old else { continue };
+            match self.copies.last_mut() {
+                Some((from, to, len)) if *from + *len == old && *to + *len == k => *len += 1,
+                _ => self.copies.push((old, k, 1)),
+            }
+        }
+        if !self.copies.is_empty() {
+            std::mem::swap(&mut self.blurred, &mut self.previous);
+        }
         self.blurred
             .reserve(&self.ctx, 4 * n2 * count.max(1) as u64);
-        self.rows
-            .reserve(&self.ctx, 4 * n2 * count.clamp(1, capacity) as u64);
+        let drawn: Vec<u32> = (0..count)
+            .filter(|&k| reuse[k as usize].is_none())
+            .collect();
+        let mut maps = plan.maps.clone();
         let mut instances: Vec<u32> = Vec::new();
         self.batches.clear();
-        let mut first = 0;
-        while first < count {
-            let batch_count = (count - first).min(capacity);
-            let maps = &plan.maps[first as usize..(first + batch_count) as usize];
+        for (b, batch) in drawn.chunks(capacity as usize).enumerate() {
+            let first = b as u32 * capacity;
+            for (tile, &k) in batch.iter().enumerate() {
+                maps[k as usize].tile = tile as u32;
+            }
             let mut draws = Vec::new();
             for (object, &group) in groups.iter().enumerate() {
                 let start = instances.len() as u32;
                 instances.extend(
-                    maps.iter()
-                        .enumerate()
-                        .filter(|(_, m)| m.occluder == group)
-                        .map(|(k, _)| first + k as u32),
+                    batch
+                        .iter()
+                        .filter(|&&k| maps[k as usize].occluder == group),
                 );
                 let drawn = instances.len() as u32 - start;
                 if drawn > 0 {
@@ -540,11 +582,17 @@ impl Gpu {
             }
             self.batches.push(Batch {
                 first,
-                count: batch_count,
+                count: batch.len() as u32,
                 draws,
             });
-            first += batch_count;
         }
+        self.rows.reserve(
+            &self.ctx,
+            4 * n2 * (drawn.len() as u32).clamp(1, capacity) as u64,
+        );
+        self.maps.write(&self.ctx, &maps);
+        self.ranges.write(&self.ctx, &plan.ranges);
+        self.drawn.write(&self.ctx, &drawn);
         self.instances.write(&self.ctx, &instances);
         // The atlas: as many tiles as the largest batch needs, square.
         let largest = self.batches.iter().map(|b| b.count).max().unwrap_or(1);
@@ -588,7 +636,6 @@ impl Gpu {
                 entries: &[
                     entry(0, self.atlas_blocks.binding()),
                     entry(1, self.vertices.as_entire_binding()),
-                    entry(2, self.triangles.as_entire_binding()),
                     entry(3, self.objects.as_entire_binding()),
                     entry(4, self.lights.as_entire_binding()),
                     entry(5, self.maps.buffer.as_entire_binding()),
@@ -607,8 +654,19 @@ impl Gpu {
                     entry(7, wgpu::BindingResource::TextureView(coverage)),
                     entry(8, self.rows.buffer.as_entire_binding()),
                     entry(9, self.blurred.buffer.as_entire_binding()),
+                    entry(10, self.drawn.buffer.as_entire_binding()),
                 ],
             });
+        let bytes = 4 * (n * n) as u64;
+        for &(old, new, count) in &self.copies {
+            encoder.copy_buffer_to_buffer(
+                &self.previous.buffer,
+                old as u64 * bytes,
+                &self.blurred.buffer,
+                new as u64 * bytes,
+                count as u64 * bytes,
+            );
+        }
         for (b, batch) in self.batches.iter().enumerate() {
             let offset = self.atlas_blocks.write(
                 &self.ctx,
@@ -639,9 +697,10 @@ impl Gpu {
                 });
                 pass.set_pipeline(&self.cover);
                 pass.set_bind_group(0, &cover_group, &[offset]);
+                pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
                 for &(object, first, count) in &batch.draws {
                     let range = &self.triangle_ranges[object];
-                    pass.draw(3 * range.start..3 * range.end, first..first + count);
+                    pass.draw_indexed(3 * range.start..3 * range.end, 0, first..first + count);
                 }
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -815,11 +874,11 @@ impl Gpu {
                 light: 0,
                 occluder: 0,
                 receiver: 0,
-                _pad: 0,
+                tile: 0,
             }],
             ranges: vec![[0, 1]],
         };
-        self.set_plan(&plan, &[0]);
+        self.set_plan(&plan, &[0], &[None]);
         self.set_shading(&vec![0.0; 4 * self.vertex_count as usize]);
         let camera = Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 4, 4)?;
         let ctx = Arc::clone(&self.ctx);
@@ -830,6 +889,7 @@ impl Gpu {
             Ok(())
         })?;
         self.batches.clear();
+        self.copies.clear();
         self.map_count = 0;
         Ok(())
     }

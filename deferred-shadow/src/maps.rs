@@ -72,7 +72,9 @@ pub struct MapWindow {
     pub occluder: u32,
     /// The receiving group.
     pub receiver: u32,
-    pub _pad: u32,
+    /// Where the map is drawn: its tile in its batch of the atlas (set by
+    /// the GPU side for the maps it draws).
+    pub tile: u32,
 }
 
 /// Every map of a frame, sorted by receiving group and then light, with the
@@ -82,6 +84,28 @@ pub struct Plan {
     pub maps: Vec<MapWindow>,
     /// `[first, count]` of receiving group b and light i at `b * q + i`.
     pub ranges: Vec<[u32; 2]>,
+}
+
+impl Plan {
+    /// For each map, the index of the same map in `previous` when it can be
+    /// kept: same receiver, light and occluder, neither group moved
+    /// (`moved[g]`) and the lights did not change since `previous`.
+    pub fn reuse(&self, previous: &Plan, moved: &[bool]) -> Vec<Option<u32>> {
+        let key = |m: &MapWindow| (m.receiver, m.light, m.occluder);
+        let old: std::collections::HashMap<_, u32> = previous
+            .maps
+            .iter()
+            .enumerate()
+            .map(|(k, m)| (key(m), k as u32))
+            .collect();
+        self.maps
+            .iter()
+            .map(|m| {
+                let still = !moved[m.receiver as usize] && !moved[m.occluder as usize];
+                old.get(&key(m)).copied().filter(|_| still)
+            })
+            .collect()
+    }
 }
 
 /// A bounding sphere from a box: its centre and half its diagonal.
@@ -134,7 +158,7 @@ impl Plan {
                         light: i as u32,
                         occluder: a as u32,
                         receiver: b as u32,
-                        _pad: 0,
+                        tile: 0,
                     });
                 }
                 plan.ranges[b * q + i] = [first, plan.maps.len() as u32 - first];

@@ -88,6 +88,9 @@ struct Posed {
     uploaded: Option<Vec3>,
     /// The maps match the poses and lights.
     maps_ready: bool,
+    /// The plan of the maps on the GPU and the poses it was made for; `None`
+    /// when the lights changed since.
+    planned: Option<(Plan, Vec<Affine3A>)>,
 }
 
 enum SelfRadiance {
@@ -226,11 +229,31 @@ impl DeferredShadow {
         let start = Instant::now();
         let bounds = world_bounds(&scene.parts, &posed.transforms);
         let plan = Plan::new(&lit.gpu, &bounds, &scene.groups, self.config.map_resolution);
-        scene.gpu.set_plan(&plan, &scene.groups.of_object);
+        // Maps between groups that did not move since they were drawn are
+        // kept.
+        let reuse = match &posed.planned {
+            Some((previous, transforms)) => {
+                let mut moved = vec![false; scene.groups.len()];
+                for (o, (now, then)) in posed.transforms.iter().zip(transforms).enumerate() {
+                    if now != then {
+                        moved[scene.groups.of_object[o] as usize] = true;
+                    }
+                }
+                plan.reuse(previous, &moved)
+            }
+            None => vec![None; plan.maps.len()],
+        };
+        scene.gpu.set_plan(&plan, &scene.groups.of_object, &reuse);
         self.profile
             .seconds(stage, "map planning (CPU)", start.elapsed().as_secs_f64());
         self.profile
             .count(stage, "occlusion maps", plan.maps.len() as u64);
+        self.profile.count(
+            stage,
+            "occlusion maps drawn",
+            reuse.iter().filter(|r| r.is_none()).count() as u64,
+        );
+        posed.planned = Some((plan, posed.transforms.clone()));
         posed.maps_ready = true;
         Ok(true)
     }
@@ -286,6 +309,7 @@ impl DeferredShadow {
             posed.radiance.iter_mut().for_each(|r| *r = None);
             posed.weights_stale.iter_mut().for_each(|s| *s = true);
             posed.maps_ready = false;
+            posed.planned = None;
         }
         Ok(())
     }
@@ -317,6 +341,7 @@ impl DeferredShadow {
             weights_stale: Vec::new(),
             uploaded: None,
             maps_ready: false,
+            planned: None,
         });
         let fresh = posed.transforms.len() != poses.len();
         if fresh {

@@ -347,3 +347,63 @@ fn interpenetrating_objects_give_bounded_radiance() {
             .all(|p| p.is_finite() && p.min_element() >= 0.0)
     );
 }
+
+/// Maps kept from the previous frame (their objects did not move) give the
+/// image a fresh computation of the frame gives.
+#[test]
+fn kept_maps_match_redrawn_ones() {
+    let Some(ctx) = test_context() else { return };
+    let ball = shapes::uv_sphere("ball", Vec3::new(-0.5, 0.4, 0.0), 0.3, 12, 24).unwrap();
+    let post = shapes::cuboid(
+        "post",
+        Vec3::new(0.4, 0.0, -0.1),
+        Vec3::new(0.6, 0.8, 0.1),
+        false,
+    )
+    .unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.5, 1).unwrap();
+    let objects = [ball, post, floor]
+        .into_iter()
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: white(),
+        })
+        .collect();
+    let frames = (0..3)
+        .map(|i| Frame {
+            time: i as f32,
+            poses: vec![
+                Pose::Rigid(Affine3A::from_translation(Vec3::X * 0.2 * i as f32)),
+                Pose::Rigid(Affine3A::IDENTITY),
+                Pose::Rigid(Affine3A::IDENTITY),
+            ],
+        })
+        .collect();
+    let scene = Scene::new("moving ball", objects, frames, camera()).unwrap();
+    let env = patchy();
+    let mut walked = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    walked.prepare(&scene).unwrap();
+    walked.relight(&env).unwrap();
+    for f in 0..3 {
+        walked
+            .update(&scene.frame_geometry(f).unwrap(), scene.camera())
+            .unwrap();
+    }
+    let drawn = walked
+        .profile()
+        .count_in(shadow_core::Stage::Update, "occlusion maps drawn");
+    let all = walked.map_count().map(u64::from);
+    assert!(drawn < all, "{drawn:?} of {all:?} maps drawn");
+    let image = walked.render(scene.camera()).unwrap();
+
+    let mut fresh = DeferredShadow::new(ctx, Config::default()).unwrap();
+    fresh.prepare(&scene).unwrap();
+    fresh.relight(&env).unwrap();
+    fresh
+        .update(&scene.frame_geometry(2).unwrap(), scene.camera())
+        .unwrap();
+    let expected = fresh.render(scene.camera()).unwrap();
+    for (a, b) in image.pixels.iter().zip(&expected.pixels) {
+        assert_relative_eq!(*a, *b, epsilon = 1e-5);
+    }
+}

@@ -14,7 +14,7 @@ use harness::{
     reference::{
         self, ImageReference, ReferenceCache, ReferenceSettings, transfer::TransferSettings,
     },
-    report::{ImageReferenceInfo, MachineInfo, ReferenceInfo, Report},
+    report::{ImageReferenceInfo, MachineInfo, ReferenceInfo, Report, STRIP_SCENE},
     run::{self, References},
     scenes::{self, ENVIRONMENTS, SCENES},
 };
@@ -485,6 +485,7 @@ fn main() -> Result<()> {
                 references: Vec::new(),
                 runs: Vec::new(),
                 skipped: Vec::new(),
+                strip: None,
             };
             for spec in specs {
                 let scene = scenes::builtin(spec.name)?;
@@ -528,9 +529,13 @@ fn main() -> Result<()> {
                         }
                     }
                 }
+                let runs: Vec<_> = report.runs[first_run..].iter().collect();
                 if let (Some(images_dir), Some(reference)) = (&image.images, image_refs.last()) {
-                    let runs: Vec<_> = report.runs[first_run..].iter().collect();
                     images::write_scene(images_dir, scene.name(), &reference.image, &runs)?;
+                }
+                if let (true, Some(reference)) = (spec.name == STRIP_SCENE, image_refs.last()) {
+                    images::write_scene(&dir.join("strip"), scene.name(), &reference.image, &runs)?;
+                    report.strip = Some(scene.name().to_string());
                 }
             }
             report.machine.adapter = gpu.adapter();

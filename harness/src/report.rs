@@ -114,7 +114,23 @@ pub struct Report {
     pub runs: Vec<RunResult>,
     /// Method × scene pairs that could not run, and why.
     pub skipped: Vec<(String, String, String)>,
+    /// The scene whose images the report shows side by side
+    /// ([`STRIP_SCENE`]), when its images were written (under
+    /// `strip/{scene}/`).
+    pub strip: Option<String>,
 }
+
+/// The scene of the image strip: the bunny's contact shadow on a
+/// two-triangle floor, which per-vertex methods cannot draw.
+pub const STRIP_SCENE: &str = "bunny";
+
+/// The methods of the strip, in order.
+const STRIP_METHODS: [&str; 4] = [
+    "deferred-shadow",
+    "hemi-raster",
+    "occlusion-query-k258",
+    "raytrace-64-vertex",
+];
 
 impl Report {
     /// Writes `report.json`, `report.md` and the speed-versus-error charts
@@ -170,8 +186,9 @@ impl Report {
              relative errors (floor 1% of the RMS radiance), the worst over frames; \"noise\" is the \
              reference's own relative L2 noise, below which errors cannot be told apart. Time per \
              frame is update + shade per vertex, update + render per image; relighting is timed \
-             apart. Times are medians of repeated runs, wall clock (a frame is not repeated once its \
-             stages took 2 s).\n"
+             apart. Times are wall clock: update on its first call for each frame (a repeat with the \
+             same geometry may reuse the work), the other stages medians of repeated runs (a frame \
+             is not repeated once its stages took 2 s).\n"
         );
         let _ = writeln!(s, "## References\n");
         let _ = writeln!(
@@ -290,6 +307,9 @@ impl Report {
                 );
             }
         }
+        if let Some(scene) = &self.strip {
+            self.strip_markdown(&mut s, scene);
+        }
         if !self.skipped.is_empty() {
             let _ = writeln!(s, "\n## Not run\n");
             for (method, scene, why) in &self.skipped {
@@ -297,5 +317,52 @@ impl Report {
             }
         }
         s
+    }
+
+    /// The strip: the reference, then each strip method's image and its
+    /// error map, with its error per pixel.
+    fn strip_markdown(&self, s: &mut String, scene: &str) {
+        let runs: Vec<&RunResult> = STRIP_METHODS
+            .iter()
+            .filter_map(|m| {
+                self.runs
+                    .iter()
+                    .find(|r| r.scene == scene && r.method == *m && r.last_image.is_some())
+            })
+            .collect();
+        let _ = writeln!(s, "\n## Per pixel against per vertex: {scene}\n");
+        let _ = writeln!(
+            s,
+            "The contact shadow on a floor of two triangles: per-vertex methods interpolate \
+             between the floor's four corners, deferred shadowing draws it per pixel. Top: the \
+             images (the reference's exposure); bottom: relative error per pixel (0.1% to 100%, \
+             logarithmic).\n"
+        );
+        let header: Vec<String> = std::iter::once("reference".to_string())
+            .chain(runs.iter().map(|r| {
+                format!(
+                    "{} ({:.1}%)",
+                    r.method,
+                    100.0 * r.mean_image_error().unwrap_or(f32::NAN)
+                )
+            }))
+            .collect();
+        let _ = writeln!(s, "| {} |", header.join(" | "));
+        let _ = writeln!(s, "|{}", "---|".repeat(header.len()));
+        let images: Vec<String> =
+            std::iter::once(format!("![reference](strip/{scene}/reference.png)"))
+                .chain(
+                    runs.iter()
+                        .map(|r| format!("![{0}](strip/{scene}/{0}.png)", r.method)),
+                )
+                .collect();
+        let _ = writeln!(s, "| {} |", images.join(" | "));
+        let errors: Vec<String> = std::iter::once(String::new())
+            .chain(
+                runs.iter()
+                    .map(|r| format!("![{0} error](strip/{scene}/{0}-error.png)", r.method)),
+            )
+            .collect();
+        let _ = writeln!(s, "| {} |", errors.join(" | "));
     }
 }

@@ -20,7 +20,7 @@ struct Map {
     light: u32,
     occluder: u32,
     receiver: u32,
-    pad: u32,
+    tile: u32,
 }
 
 // An object's pose and material (diffuse.w: its group, exact in f32;
