@@ -131,7 +131,10 @@ fn fig7(c: &mut Criterion, ctx: &Arc<GpuContext>) {
             let scene = moving_on_floor(name, path, brdf);
             let frames = frames(&scene);
             let mut group = c.benchmark_group(format!("fig7/{name}-{material}"));
-            group.sample_size(10);
+            group
+                .sample_size(10)
+                .warm_up_time(std::time::Duration::from_secs(1))
+                .measurement_time(std::time::Duration::from_secs(3));
             for lights in [16, 32, 64] {
                 for map_resolution in [32, 64, 128] {
                     let config = Config {

@@ -77,7 +77,7 @@ struct Params {
     width: u32,
     height: u32,
     stride: u32,
-    pad: u32,
+    masks: u32,
 }
 
 /// The scene's static data, in model space.
@@ -185,7 +185,10 @@ pub struct Gpu {
     objects: wgpu::Buffer,
     lights: wgpu::Buffer,
     maps: Growing,
-    ranges: Growing,
+    /// The maps' ranges per receiving group and light, then the triangles'
+    /// masks (deferred.wgsl's `culling`).
+    culling: Growing,
+    masks_offset: u32,
     instances: Growing,
     blurred: Growing,
     /// The previous frame's maps, from which kept maps are copied.
@@ -453,7 +456,8 @@ impl Gpu {
                 wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             ),
             maps: Growing::new(c, "maps", storage_usage),
-            ranges: Growing::new(c, "map ranges", storage_usage),
+            culling: Growing::new(c, "map ranges and masks", storage_usage),
+            masks_offset: 0,
             instances: Growing::new(c, "map instances", storage_usage),
             blurred: Growing::new(
                 c,
@@ -528,7 +532,7 @@ impl Gpu {
     /// Takes `plan` for the next [`Gpu::record_maps`]: uploads its windows
     /// and ranges and lays its maps out in atlas batches. `groups[o]` is the
     /// group of object o.
-    pub fn set_plan(&mut self, plan: &Plan, groups: &[u32], reuse: &[Option<u32>]) {
+    pub fn set_plan(&mut self, plan: &Plan, masks: &[u32], groups: &[u32], reuse: &[Option<u32>]) {
         let n = self.resolution;
         let limit = self
             .ctx
@@ -591,7 +595,10 @@ impl Gpu {
             4 * n2 * (drawn.len() as u32).clamp(1, capacity) as u64,
         );
         self.maps.write(&self.ctx, &maps);
-        self.ranges.write(&self.ctx, &plan.ranges);
+        let mut culling: Vec<u32> = plan.ranges.iter().flatten().copied().collect();
+        self.masks_offset = culling.len() as u32;
+        culling.extend_from_slice(masks);
+        self.culling.write(&self.ctx, &culling);
         self.drawn.write(&self.ctx, &drawn);
         self.instances.write(&self.ctx, &instances);
         // The atlas: as many tiles as the largest batch needs, square.
@@ -745,7 +752,7 @@ impl Gpu {
                     entry(3, self.objects.as_entire_binding()),
                     entry(4, self.lights.as_entire_binding()),
                     entry(5, self.maps.buffer.as_entire_binding()),
-                    entry(6, self.ranges.buffer.as_entire_binding()),
+                    entry(6, self.culling.buffer.as_entire_binding()),
                     entry(7, self.blurred.buffer.as_entire_binding()),
                     entry(8, self.shading.buffer.as_entire_binding()),
                     entry(9, wgpu::BindingResource::TextureView(&surface)),
@@ -765,7 +772,7 @@ impl Gpu {
             width,
             height,
             stride: 4 + self.light_count,
-            pad: 0,
+            masks: self.masks_offset,
         }
     }
 
@@ -878,7 +885,8 @@ impl Gpu {
             }],
             ranges: vec![[0, 1]],
         };
-        self.set_plan(&plan, &[0], &[None]);
+        let masks = vec![u32::MAX; self.triangle_ranges.last().map_or(0, |r| r.end) as usize];
+        self.set_plan(&plan, &masks, &[0], &[None]);
         self.set_shading(&vec![0.0; 4 * self.vertex_count as usize]);
         let camera = Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 4, 4)?;
         let ctx = Arc::clone(&self.ctx);

@@ -87,6 +87,46 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// Per triangle and light, which maps of its receiving group's range
+    /// its projection along the light touches: bit j for the range's j-th
+    /// map, bit 31 for the 32nd and later. `positions` are world-space
+    /// vertices, `triangles` their corners and object, `groups[o]` the group
+    /// of object o. The deferred pass reads only the maps a pixel's
+    /// triangle touches.
+    pub fn masks(
+        &self,
+        lights: &[GpuLight],
+        positions: &[Vec3],
+        triangles: &[[u32; 4]],
+        groups: &[u32],
+    ) -> Vec<u32> {
+        use rayon::prelude::*;
+        let q = lights.len();
+        let mut masks = vec![0u32; triangles.len() * q];
+        masks.par_chunks_mut(q).zip(triangles).for_each(|(out, t)| {
+            let corners = [t[0], t[1], t[2]].map(|v| positions[v as usize]);
+            let receiver = groups[t[3] as usize] as usize;
+            for (i, (mask, light)) in out.iter_mut().zip(lights).enumerate() {
+                let [first, count] = self.ranges[receiver * q + i];
+                if count == 0 {
+                    continue;
+                }
+                let (u, v) = (light.u.truncate(), light.v.truncate());
+                let projected = corners.map(|c| Vec2::new(c.dot(u), c.dot(v)));
+                let lo = projected[0].min(projected[1]).min(projected[2]);
+                let hi = projected[0].max(projected[1]).max(projected[2]);
+                for j in 0..count {
+                    let m = &self.maps[(first + j) as usize];
+                    let half = 0.5 / m.inverse_side;
+                    if lo.cmple(m.centre + half).all() && hi.cmpge(m.centre - half).all() {
+                        *mask |= 1 << j.min(31);
+                    }
+                }
+            }
+        });
+        masks
+    }
+
     /// For each map, the index of the same map in `previous` when it can be
     /// kept: same receiver, light and occluder, neither group moved
     /// (`moved[g]`) and the lights did not change since `previous`.

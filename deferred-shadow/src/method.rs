@@ -53,6 +53,8 @@ pub struct DeferredShadow {
 /// What `prepare` builds.
 struct Prepared {
     parts: Vec<Part>,
+    /// Every triangle's global vertex indices and object.
+    triangles: Vec<[u32; 4]>,
     groups: Groups,
     gpu: Gpu,
 }
@@ -243,7 +245,21 @@ impl DeferredShadow {
             }
             None => vec![None; plan.maps.len()],
         };
-        scene.gpu.set_plan(&plan, &scene.groups.of_object, &reuse);
+        let positions: Vec<Vec3> = scene
+            .parts
+            .iter()
+            .zip(&posed.transforms)
+            .flat_map(|(part, t)| part.mesh.positions().iter().map(|p| t.transform_point3(*p)))
+            .collect();
+        let masks = plan.masks(
+            &lit.gpu,
+            &positions,
+            &scene.triangles,
+            &scene.groups.of_object,
+        );
+        scene
+            .gpu
+            .set_plan(&plan, &masks, &scene.groups.of_object, &reuse);
         self.profile
             .seconds(stage, "map planning (CPU)", start.elapsed().as_secs_f64());
         self.profile
@@ -613,7 +629,12 @@ impl ShadowMethod for DeferredShadow {
         if let Some(lit) = &self.lit {
             gpu.set_lights(&lit.gpu);
         }
-        self.scene = Some(Prepared { parts, groups, gpu });
+        self.scene = Some(Prepared {
+            parts,
+            triangles: geometry.triangles,
+            groups,
+            gpu,
+        });
         Ok(())
     }
 

@@ -16,7 +16,8 @@ struct Params {
     height: u32,
     // Floats per vertex in `shading`: L_s (4), then one weight per light.
     stride: u32,
-    pad: u32,
+    // Where the triangles' masks start in `culling`.
+    masks: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -25,7 +26,11 @@ struct Params {
 @group(0) @binding(3) var<storage, read> objects: array<Object>;
 @group(0) @binding(4) var<uniform> lights: array<Light, MAX_LIGHTS>;
 @group(0) @binding(5) var<storage, read> maps: array<Map>;
-@group(0) @binding(6) var<storage, read> ranges: array<vec2<u32>>;
+// Which maps a point reads: first, per receiving group and light, the
+// range [first, count] of its maps (2 words each); then, from
+// `params.masks`, per triangle and light, a bit per map of that range whose
+// window the triangle's projection touches (bit 31: the 32nd and later).
+@group(0) @binding(6) var<storage, read> culling: array<u32>;
 @group(0) @binding(7) var<storage, read> blurred: array<f32>;
 // Per vertex: L_s (rgb, and a pad), then v_s max(0, n·ω_i) per light.
 @group(0) @binding(8) var<storage, read> shading: array<f32>;
@@ -50,27 +55,47 @@ fn weight(v: u32, i: u32) -> f32 {
     return shading[v * params.stride + 4u + i];
 }
 
-// O_i(p) for receiving group `receiver`: every occluder group's map,
-// bilinear, zero outside its window, combined.
-fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light) -> f32 {
-    let range = ranges[receiver * params.lights + i];
+// One map's occlusion ratio at light-plane point `a`: bilinear, zero
+// outside its window.
+fn map_at(k: u32, a: vec2<f32>) -> f32 {
     let n = params.resolution;
+    let m = maps[k];
+    let uv = (a - m.centre) * m.inverse_side + 0.5;
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+        return 0.0;
+    }
+    let t = clamp(uv * f32(n) - 0.5, vec2<f32>(0.0), vec2<f32>(f32(n - 1u)));
+    let t0 = vec2<u32>(floor(t));
+    let t1 = min(t0 + 1u, vec2<u32>(n - 1u));
+    let f = t - floor(t);
+    let base = k * n * n;
+    let top = mix(blurred[base + t0.y * n + t0.x], blurred[base + t0.y * n + t1.x], f.x);
+    let bottom = mix(blurred[base + t1.y * n + t0.x], blurred[base + t1.y * n + t1.x], f.x);
+    return clamp(mix(top, bottom, f.y), 0.0, 1.0);
+}
+
+// O_i(p) for receiving group `receiver`: the maps of `mask` (bit j: the
+// range's j-th map; bit 31: the 32nd and later), combined.
+fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light, mask: u32) -> f32 {
+    let at = 2u * (receiver * params.lights + i);
+    let first = culling[at];
+    let count = culling[at + 1u];
     let a = vec2<f32>(dot(p, light.u.xyz), dot(p, light.v.xyz));
     var visible = 1.0;
-    for (var k = range.x; k < range.x + range.y; k++) {
-        let m = maps[k];
-        let uv = (a - m.centre) * m.inverse_side + 0.5;
-        if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
-            continue;
+    var bits = mask & select(0xffffffffu, (1u << min(count, 31u)) - 1u, count < 32u);
+    loop {
+        if bits == 0u {
+            break;
         }
-        let t = clamp(uv * f32(n) - 0.5, vec2<f32>(0.0), vec2<f32>(f32(n - 1u)));
-        let t0 = vec2<u32>(floor(t));
-        let t1 = min(t0 + 1u, vec2<u32>(n - 1u));
-        let f = t - floor(t);
-        let base = k * n * n;
-        let top = mix(blurred[base + t0.y * n + t0.x], blurred[base + t0.y * n + t1.x], f.x);
-        let bottom = mix(blurred[base + t1.y * n + t0.x], blurred[base + t1.y * n + t1.x], f.x);
-        visible *= 1.0 - clamp(mix(top, bottom, f.y), 0.0, 1.0);
+        let j = firstTrailingBit(bits);
+        bits &= bits - 1u;
+        if j == 31u {
+            for (var k = first + 31u; k < first + count; k++) {
+                visible *= 1.0 - map_at(k, a);
+            }
+        } else {
+            visible *= 1.0 - map_at(first + j, a);
+        }
     }
     return 1.0 - visible;
 }
@@ -88,7 +113,9 @@ fn brdf(o: Object, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
 
 // L = max(L_s − L_o, 0) at p on `object`, with the vertex data of `corners`
 // weighted by `bary`.
-fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u32>, bary: vec3<f32>) -> vec3<f32> {
+// `triangle`: the triangle p lies on, whose masks say which maps to read;
+// none (0xffffffff) reads them all.
+fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u32>, bary: vec3<f32>, triangle: u32) -> vec3<f32> {
     let o = objects[object];
     let receiver = u32(o.diffuse.w);
     let wo = normalize(params.eye.xyz - p);
@@ -96,7 +123,11 @@ fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u
     var lost = vec3<f32>(0.0);
     for (var i = 0u; i < q; i++) {
         let light = lights[i];
-        let occluded = occlusion(receiver, i, p, light);
+        var mask = 0xffffffffu;
+        if triangle != 0xffffffffu {
+            mask = culling[params.masks + triangle * q + i];
+        }
+        let occluded = occlusion(receiver, i, p, light, mask);
         var w = max(dot(n, light.direction.xyz), 0.0);
         if params.self_visibility != 0u {
             w = bary.x * weight(corners.x, i) + bary.y * weight(corners.y, i) + bary.z * weight(corners.z, i);
@@ -138,7 +169,7 @@ fn at_pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let n = normalize(bary.x * world_normal(o, t.x) + bary.y * world_normal(o, t.y) + bary.z * world_normal(o, t.z));
     let ls = bary.x * self_radiance(t.x) + bary.y * self_radiance(t.y) + bary.z * self_radiance(t.z);
-    textureStore(image, gid.xy, vec4<f32>(shade(t.w, p, n, ls, t.xyz, bary), 1.0));
+    textureStore(image, gid.xy, vec4<f32>(shade(t.w, p, n, ls, t.xyz, bary, g.w - 1u), 1.0));
 }
 
 @compute @workgroup_size(64)
@@ -151,5 +182,5 @@ fn at_vertices(@builtin(global_invocation_id) gid: vec3<u32>) {
     let o = objects[object];
     let p = world_position(o, v);
     let n = normalize(world_normal(o, v));
-    vertex_radiance[v] = vec4<f32>(shade(object, p, n, self_radiance(v), vec3<u32>(v), vec3<f32>(1.0, 0.0, 0.0)), 1.0);
+    vertex_radiance[v] = vec4<f32>(shade(object, p, n, self_radiance(v), vec3<u32>(v), vec3<f32>(1.0, 0.0, 0.0), 0xffffffffu), 1.0);
 }
