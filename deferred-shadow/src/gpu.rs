@@ -606,21 +606,12 @@ impl Gpu {
         let tiles = (largest as f64).sqrt().ceil() as u32;
         let side = (tiles * n).min(per_row * n);
         if self.coverage.as_ref().is_none_or(|(s, _)| *s < side) {
-            let texture = self.ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("coverage atlas"),
-                size: wgpu::Extent3d {
-                    width: side,
-                    height: side,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: COVERAGE,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            });
+            let texture = self.ctx.create_texture_2d(
+                "coverage atlas",
+                (side, side),
+                COVERAGE,
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            );
             self.coverage = Some((side, texture.create_view(&Default::default())));
         }
         if self.atlas_blocks.capacity() < self.batches.len() {
@@ -920,22 +911,8 @@ impl Gpu {
 
 impl Targets {
     fn new(ctx: &GpuContext, width: u32, height: u32) -> Targets {
-        let texture = |label, format, usage| {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
+        let texture =
+            |label, format, usage| ctx.create_texture_2d(label, (width, height), format, usage);
         let attach = wgpu::TextureUsages::RENDER_ATTACHMENT;
         Targets {
             width,

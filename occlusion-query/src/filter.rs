@@ -208,20 +208,12 @@ impl CameraFilter {
             .as_ref()
             .is_none_or(|(w, h, _)| (*w, *h) != (width, height))
         {
-            let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("camera depth"),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: DEPTH,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            });
+            let texture = ctx.create_texture_2d(
+                "camera depth",
+                (width, height),
+                DEPTH,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            );
             self.depth = Some((width, height, texture.create_view(&Default::default())));
         }
         let view = &self.depth.as_ref().expect("made above").2;

@@ -332,20 +332,12 @@ impl Visibility {
         let compare = compute_pipeline(&compare_shader, &compare_layout);
         let convert = compute_pipeline(&convert_shader, &convert_layout);
 
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("depth atlas"),
-            size: wgpu::Extent3d {
-                width: atlas.side(),
-                height: atlas.side(),
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: DEPTH,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
+        let texture = ctx.create_texture_2d(
+            "depth atlas",
+            (atlas.side(), atlas.side()),
+            DEPTH,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
         let atlas_view = texture.create_view(&Default::default());
         let buffer = |label, size: u64, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {

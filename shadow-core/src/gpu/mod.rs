@@ -319,6 +319,30 @@ impl GpuContext {
         })
     }
 
+    /// A single-level, single-sample 2D texture of `width` × `height`.
+    pub fn create_texture_2d(
+        &self,
+        label: &str,
+        (width, height): (u32, u32),
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> wgpu::Texture {
+        self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    }
+
     /// A buffer holding `contents`, with `usage` (plus nothing implicit).
     pub fn create_buffer_init<T: bytemuck::Pod>(
         &self,
