@@ -122,6 +122,11 @@ fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u
     let q = params.lights;
     var lost = vec3<f32>(0.0);
     for (var i = 0u; i < q; i++) {
+        // No map of this light reaches the object's group: nothing to take
+        // away (the same for every pixel of the object, so lanes agree).
+        if culling[2u * (receiver * q + i) + 1u] == 0u {
+            continue;
+        }
         let light = lights[i];
         var mask = 0xffffffffu;
         if triangle != 0xffffffffu {
