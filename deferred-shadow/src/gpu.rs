@@ -265,6 +265,40 @@ fn compute(
         })
 }
 
+/// A render pipeline of vertex and fragment entries `entries` pulling its
+/// vertices from storage (no vertex buffers), into one `target`.
+fn render(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    module: &wgpu::ShaderModule,
+    (vertex, fragment): (&str, &str),
+    target: wgpu::TextureFormat,
+    depth_stencil: Option<wgpu::DepthStencilState>,
+) -> wgpu::RenderPipeline {
+    ctx.device
+        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(vertex),
+            layout: Some(&pipeline_layout(ctx, layout)),
+            vertex: wgpu::VertexState {
+                module,
+                entry_point: Some(vertex),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module,
+                entry_point: Some(fragment),
+                compilation_options: Default::default(),
+                targets: &[Some(target.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+}
+
 fn texture_entry(
     binding: u32,
     sample_type: wgpu::TextureSampleType,
@@ -317,29 +351,14 @@ impl Gpu {
                 storage(6, true, vertex),
             ],
         );
-        let cover = c
-            .device
-            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("cover"),
-                layout: Some(&pipeline_layout(c, &cover_layout)),
-                vertex: wgpu::VertexState {
-                    module: &maps_module,
-                    entry_point: Some("cover"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: None,
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &maps_module,
-                    entry_point: Some("covered"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(COVERAGE.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+        let cover = render(
+            c,
+            &cover_layout,
+            &maps_module,
+            ("cover", "covered"),
+            COVERAGE,
+            None,
+        );
         let blur_layout = layout(
             c,
             "blur",
@@ -366,35 +385,21 @@ impl Gpu {
                 storage(3, true, vertex),
             ],
         );
-        let surface = c
-            .device
-            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("visible surface"),
-                layout: Some(&pipeline_layout(c, &surface_layout)),
-                vertex: wgpu::VertexState {
-                    module: &surface_module,
-                    entry_point: Some("surface"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &surface_module,
-                    entry_point: Some("visible"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(SURFACE.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+        let depth = wgpu::DepthStencilState {
+            format: DEPTH,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        };
+        let surface = render(
+            c,
+            &surface_layout,
+            &surface_module,
+            ("surface", "visible"),
+            SURFACE,
+            Some(depth),
+        );
 
         let deferred_module = shader(c, "deferred", include_str!("shaders/deferred.wgsl"));
         let mut deferred_entries = vec![
