@@ -12,10 +12,12 @@ use std::{
 use glam::Vec3;
 use harness::{
     export::{self, Provenance},
-    images, scenes,
+    images,
+    methods::SharedGpu,
+    scenes,
 };
 use shadow_core::{
-    DirectionalVisibility, Environment, Export,
+    DirectionalVisibility, Environment, Export, Scene, ShadowMethod,
     sh::{self, ShOrder},
 };
 
@@ -105,26 +107,67 @@ fn patchy_sky() -> Environment {
     Environment::new("patchy", w, h, texels).unwrap()
 }
 
-#[test]
-fn exported_transfer_relights_to_the_methods_own_radiance() {
-    let scene = scenes::builtin("wall").unwrap();
+/// `name` run on the built-in `scene` under a uniform sky, its export
+/// written to an `.npz` and read back: the method (to relight and shade
+/// next), the scene, and the file's arrays and metadata.
+fn exported(
+    scene: &str,
+    name: &str,
+    gpu: &SharedGpu,
+) -> (
+    Box<dyn ShadowMethod>,
+    Scene,
+    HashMap<String, Npy>,
+    serde_json::Value,
+) {
+    let scene = scenes::builtin(scene).unwrap();
     let frame = scene.frame_geometry(0).unwrap();
-    let mut method = harness::methods::by_name("hemi-raster", &Default::default()).unwrap();
+    let mut method = harness::methods::by_name(name, gpu).unwrap();
     method.prepare(&scene).unwrap();
     method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
     method.update(&frame, scene.camera()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("wall.npz");
+    let path = dir.path().join("exported.npz");
     let from = Provenance {
         method: method.name(),
         scene: &scene,
         frame: &frame,
     };
     export::write_npz(&path, &method.export().unwrap(), from).unwrap();
-
-    // Relit from the file alone under a second environment...
     let arrays = read_npz(&path);
-    let meta: serde_json::Value = serde_json::from_str(&arrays["meta"].text()).unwrap();
+    let meta = serde_json::from_str(&arrays["meta"].text()).unwrap();
+    (method, scene, arrays, meta)
+}
+
+#[test]
+fn exported_transfer_relights_to_the_methods_own_radiance() {
+    relit_transfer_matches(exported("wall", "hemi-raster", &SharedGpu::new()));
+}
+
+/// deferred-shadow exports its self-transfer: on one object (nothing else
+/// casts on it) that is all it shades.
+#[test]
+fn exported_self_transfer_relights_to_the_methods_own_radiance() {
+    let Some(context) = shadow_core::gpu::test_context() else {
+        return;
+    };
+    relit_transfer_matches(exported(
+        "teapot",
+        "deferred-shadow",
+        &SharedGpu::with(context),
+    ));
+}
+
+/// The transfer of an export relit under a second environment from the file
+/// alone is what the method shades after relighting: to rounding.
+fn relit_transfer_matches(
+    (mut method, scene, arrays, meta): (
+        Box<dyn ShadowMethod>,
+        Scene,
+        HashMap<String, Npy>,
+        serde_json::Value,
+    ),
+) {
     assert_eq!(meta["kind"], "sh_transfer");
     let order = ShOrder::new(meta["sh"]["order"].as_u64().unwrap() as u32).unwrap();
     let n = order.coeff_count();
@@ -144,14 +187,14 @@ fn exported_transfer_relights_to_the_methods_own_radiance() {
     };
     let coefficients = transfer.f32s();
     let mut relit = Vec::new();
-    for (o, object) in frame.objects.iter().enumerate() {
-        let first: usize = frame.objects[..o].iter().map(|x| x.vertex_count()).sum();
-        for v in first..first + object.vertex_count() {
+    let objects = scene.objects();
+    for (o, object) in objects.iter().enumerate() {
+        let first: usize = objects[..o].iter().map(|x| x.mesh.vertex_count()).sum();
+        for v in first..first + object.mesh.vertex_count() {
             let e = light.dot(&coefficients[v * n..(v + 1) * n]);
             relit.push((albedo(o) * std::f32::consts::FRAC_1_PI * e).max(Vec3::ZERO));
         }
     }
-    // ... is what the method shades after relighting: to rounding.
     method.relight(&sky).unwrap();
     let shaded: Vec<Vec3> = method.shade(scene.camera().eye).unwrap().flat().collect();
     let scale = shaded.iter().map(|x| x.length()).fold(0.0, f32::max);
@@ -231,24 +274,8 @@ fn exported_visibility_relights_to_the_methods_own_radiance() {
     let Some(context) = shadow_core::gpu::test_context() else {
         return;
     };
-    let gpu = harness::methods::SharedGpu::with(context);
-    let scene = scenes::builtin("wall").unwrap();
-    let frame = scene.frame_geometry(0).unwrap();
-    let mut method = harness::methods::by_name("occlusion-query:k=66", &gpu).unwrap();
-    method.prepare(&scene).unwrap();
-    method.relight(&Environment::uniform(Vec3::ONE)).unwrap();
-    method.update(&frame, scene.camera()).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("wall.npz");
-    let from = Provenance {
-        method: method.name(),
-        scene: &scene,
-        frame: &frame,
-    };
-    export::write_npz(&path, &method.export().unwrap(), from).unwrap();
-
-    let arrays = read_npz(&path);
-    let meta: serde_json::Value = serde_json::from_str(&arrays["meta"].text()).unwrap();
+    let (mut method, scene, arrays, meta) =
+        exported("wall", "occlusion-query:k=66", &SharedGpu::with(context));
     assert_eq!(meta["kind"], "directional_visibility");
     let vec3s = |name: &str| -> Vec<Vec3> {
         arrays[name]
