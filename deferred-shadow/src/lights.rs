@@ -238,6 +238,32 @@ mod tests {
         assert!(hi / lo < 1.6, "{lo} .. {hi}");
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        /// Any map, any count: the regions tile the sphere and hold all of
+        /// the map's light, each a positive solid angle around a unit
+        /// direction.
+        #[test]
+        fn any_map_splits_into_regions_that_tile_it(
+            texels in proptest::collection::vec(0.0f32..100.0, 16 * 8),
+            q in 1usize..=64,
+        ) {
+            let texels: Vec<Vec3> = texels.iter().map(|&l| Vec3::new(l, 0.5 * l, 0.25 * l)).collect();
+            let env = Environment::new("random", 16, 8, texels).unwrap();
+            let lights = decompose(&env, q).unwrap();
+            proptest::prop_assert_eq!(lights.len(), q);
+            let omega: f32 = lights.iter().map(|l| l.solid_angle).sum();
+            proptest::prop_assert!((omega - 4.0 * std::f32::consts::PI).abs() < 1e-3);
+            let power: Vec3 = lights.iter().map(|l| l.radiosity).sum();
+            let expected = env.integral();
+            proptest::prop_assert!((power - expected).abs().max_element() <= 1e-4 * expected.max_element().max(1.0));
+            for l in &lights {
+                proptest::prop_assert!(l.solid_angle > 0.0);
+                proptest::prop_assert!((l.direction.length() - 1.0).abs() < 1e-4);
+            }
+        }
+    }
+
     #[test]
     fn impossible_counts_are_configuration_errors() {
         let env = Environment::uniform(Vec3::ONE);

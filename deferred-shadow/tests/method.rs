@@ -407,3 +407,42 @@ fn kept_maps_match_redrawn_ones() {
         assert_relative_eq!(*a, *b, epsilon = 1e-5);
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(6))]
+    /// Adding an occluder never brightens a vertex of the others: the
+    /// product of visibilities only takes more light away. (The blocker
+    /// stays clear of the ball, so that the two do not become one group.)
+    #[test]
+    fn another_blocker_never_brightens(
+        x in -0.4f32..0.8,
+        z in -0.8f32..0.8,
+        height in 0.2f32..0.8,
+    ) {
+        let Some(ctx) = test_context() else { return Ok(()) };
+        let ball = shapes::uv_sphere("ball", Vec3::new(-1.0, 0.4, 0.0), 0.3, 8, 16).unwrap();
+        let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap();
+        let centre = Vec3::new(x, height, z);
+        let blocker = shapes::cuboid("blocker", centre - 0.1, centre + 0.1, false).unwrap();
+        let shade = |meshes: Vec<shadow_core::Mesh>| {
+            let objects = meshes
+                .into_iter()
+                .map(|mesh| Object { mesh: Arc::new(mesh), material: white() })
+                .collect();
+            let scene = Scene::still("blockers", objects, camera()).unwrap();
+            let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+            run(&mut method, &scene, &patchy());
+            method.shade(scene.camera().eye).unwrap()
+        };
+        let without = shade(vec![ball.clone(), floor.clone()]);
+        let with = shade(vec![ball, floor, blocker]);
+        for (object, (a, b)) in with.radiance.iter().zip(&without.radiance).enumerate() {
+            for (v, (a, b)) in a.iter().zip(b).enumerate() {
+                proptest::prop_assert!(
+                    (*a - *b).max_element() <= 1e-5 * b.max_element().max(1.0),
+                    "object {} vertex {}: {} with the blocker, {} without", object, v, a, b
+                );
+            }
+        }
+    }
+}
