@@ -204,7 +204,8 @@ pub struct Gpu {
     params: Slots<Params>,
     view: wgpu::Buffer,
     coverage: Option<(u32, wgpu::TextureView)>,
-    targets: Option<Targets>,
+    /// The image's targets (1×1 until an image is recorded).
+    targets: Targets,
 
     resolution: u32,
     light_count: u32,
@@ -491,7 +492,7 @@ impl Gpu {
                 wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             ),
             coverage: None,
-            targets: None,
+            targets: Targets::new(c, 1, 1),
             cover,
             cover_layout,
             blur_rows,
@@ -718,24 +719,10 @@ impl Gpu {
         }
     }
 
-    fn deferred_group(
-        &self,
-        image: Option<&wgpu::TextureView>,
-        surface: Option<&wgpu::TextureView>,
-    ) -> wgpu::BindGroup {
-        // The per-vertex pass binds the last image targets, or stand-ins.
-        let stand_in;
-        let (surface, image) = match (surface, image, &self.targets) {
-            (Some(s), Some(i), _) => (s.clone(), i.clone()),
-            (_, _, Some(t)) => (t.surface.clone(), t.image.create_view(&Default::default())),
-            _ => {
-                stand_in = Targets::new(&self.ctx, 1, 1);
-                (
-                    stand_in.surface.clone(),
-                    stand_in.image.create_view(&Default::default()),
-                )
-            }
-        };
+    /// The deferred pass's bindings, with the current image targets (the
+    /// per-vertex pass binds them too, unused).
+    fn deferred_group(&self) -> wgpu::BindGroup {
+        let image = self.targets.image.create_view(&Default::default());
         self.ctx
             .device
             .create_bind_group(&wgpu::BindGroupDescriptor {
@@ -751,7 +738,7 @@ impl Gpu {
                     entry(6, self.culling.buffer.as_entire_binding()),
                     entry(7, self.blurred.buffer.as_entire_binding()),
                     entry(8, self.shading.buffer.as_entire_binding()),
-                    entry(9, wgpu::BindingResource::TextureView(&surface)),
+                    entry(9, wgpu::BindingResource::TextureView(&self.targets.surface)),
                     entry(10, wgpu::BindingResource::TextureView(&image)),
                     entry(11, self.vertex_radiance.as_entire_binding()),
                 ],
@@ -778,7 +765,7 @@ impl Gpu {
         let offset = self
             .params
             .write(&self.ctx, VERTEX_SLOT, &self.params(eye, 0, 0));
-        let group = self.deferred_group(None, None);
+        let group = self.deferred_group();
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, vertices"),
             timestamp_writes: None,
@@ -792,14 +779,10 @@ impl Gpu {
     /// it, into [`Gpu::image`].
     pub fn record_image(&mut self, encoder: &mut wgpu::CommandEncoder, camera: &Camera, near: f32) {
         let (width, height) = (camera.width, camera.height);
-        if self
-            .targets
-            .as_ref()
-            .is_none_or(|t| (t.width, t.height) != (width, height))
-        {
-            self.targets = Some(Targets::new(&self.ctx, width, height));
+        if (self.targets.width, self.targets.height) != (width, height) {
+            self.targets = Targets::new(&self.ctx, width, height);
         }
-        let targets = self.targets.as_ref().expect("made above");
+        let targets = &self.targets;
         let clip = clip_from_world(camera, near);
         self.ctx
             .queue
@@ -853,8 +836,7 @@ impl Gpu {
             PIXEL_SLOT,
             &self.params(camera.eye, width, height),
         );
-        let image_view = targets.image.create_view(&Default::default());
-        let group = self.deferred_group(Some(&image_view), Some(&targets.surface));
+        let group = self.deferred_group();
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, pixels"),
             timestamp_writes: None,
@@ -905,8 +887,8 @@ impl Gpu {
 
     /// The last image: `Rgba32Float`, radiance and 1 in alpha where a
     /// surface is seen, zero elsewhere.
-    pub fn image(&self) -> Option<&wgpu::Texture> {
-        self.targets.as_ref().map(|t| &t.image)
+    pub fn image(&self) -> &wgpu::Texture {
+        &self.targets.image
     }
 
     pub fn vertex_count(&self) -> usize {

@@ -66,6 +66,8 @@ struct Part {
     material: Brdf,
     /// First global vertex.
     first_vertex: usize,
+    /// Model-space bounds of the mesh.
+    bounds: Aabb,
 }
 
 /// What `relight` builds.
@@ -498,7 +500,7 @@ fn world_bounds(parts: &[Part], transforms: &[Affine3A]) -> Vec<Aabb> {
         .iter()
         .zip(transforms)
         .map(|(part, t)| {
-            let b = part.mesh.bounds();
+            let b = part.bounds;
             Aabb::from_points((0..8).map(|c| {
                 t.transform_point3(Vec3::new(
                     if c & 1 == 0 { b.min.x } else { b.max.x },
@@ -562,6 +564,7 @@ impl ShadowMethod for DeferredShadow {
                 transfer: Transfer::precompute(&object.mesh, order, self.config.rays)?,
                 material: object.material,
                 first_vertex,
+                bounds: object.mesh.bounds(),
             });
             first_vertex += object.mesh.vertex_count();
         }
@@ -712,7 +715,7 @@ impl ShadowMethod for DeferredShadow {
             Ok(())
         })?;
         let middle = Instant::now();
-        let texture = scene.gpu.image().expect("recorded above");
+        let texture = scene.gpu.image();
         let texels: Vec<[f32; 4]> = ctx.read_texture(texture)?;
         self.profile.seconds(
             Stage::Render,
@@ -799,6 +802,6 @@ impl GpuStages for DeferredShadow {
             .as_mut()
             .ok_or_else(|| Error::stage(NAME, "render before prepare"))?;
         scene.gpu.record_image(encoder, camera, near);
-        Ok(scene.gpu.image().expect("recorded above"))
+        Ok(scene.gpu.image())
     }
 }

@@ -29,6 +29,7 @@ use rayon::prelude::*;
 use shadow_core::{
     Environment, FrameGeometry, Mesh, PosedObject, Result, ShTransfer, TransferSpace,
     bvh::SceneBvh,
+    qmc::{cosine_hemisphere, sobol2},
     sh::{ShOrder, ShRgb, ShRotation, Zonal, eval_basis, project_environment},
 };
 
@@ -60,9 +61,10 @@ impl Transfer {
     /// see onto the SH basis of `order`:
     /// t_i = ∫ v_s cos y_i dω ≈ π/N Σ_k v_s(ω_k) y_i(ω_k).
     ///
-    /// The directions are a Hammersley set on the cosine-weighted
-    /// hemisphere, shifted per vertex (Cranley–Patterson rotation) so that
-    /// neighbouring vertices do not share their aliasing.
+    /// The directions are the 2-D Sobol' points mapped to the
+    /// cosine-weighted hemisphere ([`shadow_core::qmc`], as the reference
+    /// draws them) under a digital shift per vertex, so that neighbouring
+    /// vertices do not share their aliasing.
     pub fn precompute(mesh: &Arc<Mesh>, order: ShOrder, rays: u32) -> Result<Transfer> {
         let start = Instant::now();
         let alone = FrameGeometry {
@@ -84,20 +86,12 @@ impl Transfer {
                 let p = mesh.positions()[v];
                 let normal = mesh.normals()[v];
                 let (tangent, bitangent) = normal.any_orthonormal_pair();
-                let shift = hash2(v as u32);
+                let shift = vertex_shift(v as u32);
                 let mut basis = [0.0f32; 64];
                 for k in 0..rays {
-                    let u = Vec3::new(
-                        ((k as f32 + 0.5) / rays as f32 + shift.0).fract(),
-                        (radical_inverse(k) + shift.1).fract(),
-                        0.0,
-                    );
-                    let r = u.x.sqrt();
-                    let phi = 2.0 * PI * u.y;
-                    let dir = (tangent * (r * phi.cos())
-                        + bitangent * (r * phi.sin())
-                        + normal * (1.0 - u.x).max(0.0).sqrt())
-                    .normalize();
+                    let local = cosine_hemisphere(sobol2(k, shift));
+                    let dir =
+                        (tangent * local.x + bitangent * local.y + normal * local.z).normalize();
                     if bvh.unoccluded(p + normal * offset, dir, f32::INFINITY) {
                         eval_basis(order, dir, &mut basis);
                         for (o, b) in out.iter_mut().zip(&basis) {
@@ -306,22 +300,13 @@ pub fn export(transfers: &[&Transfer], rotations: &[Mat3]) -> Result<ShTransfer>
     )
 }
 
-/// Base-2 radical inverse (van der Corput) of `k`.
-fn radical_inverse(k: u32) -> f32 {
-    k.reverse_bits() as f32 * (1.0 / 4_294_967_296.0)
-}
-
-/// Two uniform numbers in [0, 1) from a vertex index (a PCG hash).
-fn hash2(v: u32) -> (f32, f32) {
+/// A vertex's digital shift of the Sobol' points (a PCG hash of its index).
+fn vertex_shift(v: u32) -> [u32; 2] {
     let pcg = |x: u32| {
         let state = x.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
         let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
         (word >> 22) ^ word
     };
     let a = pcg(v);
-    let b = pcg(a);
-    (
-        (a >> 8) as f32 / (1u32 << 24) as f32,
-        (b >> 8) as f32 / (1u32 << 24) as f32,
-    )
+    [a, pcg(a)]
 }

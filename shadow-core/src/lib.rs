@@ -14,6 +14,7 @@ mod export;
 mod mesh;
 mod method;
 mod profile;
+pub mod qmc;
 pub mod raster;
 mod scene;
 pub mod sh;

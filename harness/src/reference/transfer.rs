@@ -34,7 +34,8 @@ use shadow_core::{
     sh::{ShOrder, eval_basis},
 };
 
-use super::estimator::{cosine_hemisphere, sobol2, stream};
+use super::estimator::stream;
+use shadow_core::qmc::{cosine_hemisphere, sobol2};
 
 /// How many rays the transfer reference traces.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
