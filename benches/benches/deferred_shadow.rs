@@ -39,10 +39,9 @@ const SIDE: u32 = 512;
 /// `path`'s mesh with `material` on a two-triangle floor, moving sideways
 /// over two frames, seen in a `SIDE`² image.
 fn moving_on_floor(name: &str, path: &str, material: Brdf) -> Scene {
-    let asset = scenes::asset_scene(name, &scenes::assets_dir().join("meshes").join(path), 1)
-        .expect("shipped mesh");
-    let mut object = asset.objects()[0].clone();
-    object.material = material;
+    let meshes = scenes::assets_dir().join("meshes");
+    let asset = scenes::asset_scene(name, &meshes.join(path), 1, material).expect("shipped mesh");
+    let object = asset.objects()[0].clone();
     let bounds = object.mesh.bounds();
     let size = bounds.extent().max_element();
     let foot = Vec3::new(bounds.center().x, bounds.min.y, bounds.center().z);

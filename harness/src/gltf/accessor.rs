@@ -16,10 +16,17 @@ use ::gltf::buffer::View;
 use glam::Vec3;
 use shadow_core::{Error, Result};
 
-/// The binary payloads of one glTF document, indexed like its `buffers`.
+/// The binary payloads of one glTF document.
 pub(super) struct Buffers<'a> {
     pub path: &'a Path,
+    /// Indexed like the document's `buffers`.
     pub data: &'a [Vec<u8>],
+    /// Indexed like its `bufferViews`: the decoded bytes of views stored
+    /// compressed (`EXT_meshopt_compression`), `None` for plain ones.
+    pub decoded: &'a [Option<Vec<u8>>],
+    /// The file uses `KHR_mesh_quantization`: float attributes may be stored
+    /// as integers that are not normalized, read as their values.
+    pub quantized: bool,
 }
 
 impl Buffers<'_> {
@@ -30,8 +37,12 @@ impl Buffers<'_> {
         )
     }
 
-    /// The bytes of a buffer view, checked to lie inside its buffer.
+    /// The bytes of a buffer view, decoded if it is stored compressed, else
+    /// checked to lie inside its buffer.
     fn view_bytes(&self, accessor: &Accessor, what: &str, view: &View) -> Result<&[u8]> {
+        if let Some(Some(decoded)) = self.decoded.get(view.index()) {
+            return Ok(&decoded[..view.length()]);
+        }
         let buffer = view.buffer().index();
         let data = self
             .data
@@ -58,7 +69,10 @@ impl Buffers<'_> {
     /// Reads every component of `accessor` as `f32`: 32-bit floats as they are,
     /// normalized integers mapped to [0, 1] or [-1, 1] as glTF 2.0 §3.11
     /// prescribes (`max(c / 127, -1)` for signed bytes, `c / 255` for unsigned
-    /// bytes, likewise for shorts). Components come element by element.
+    /// bytes, likewise for shorts), and, in a file that uses
+    /// `KHR_mesh_quantization`, integers that are not normalized as their
+    /// values (the node transforms scale them back to metres). Components
+    /// come element by element.
     pub fn floats(&self, accessor: &Accessor, what: &str, dims: Dimensions) -> Result<Vec<f32>> {
         let convert: fn(&[u8]) -> f32 = match (accessor.data_type(), accessor.normalized()) {
             (DataType::F32, _) => |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
@@ -68,12 +82,17 @@ impl Buffers<'_> {
                 |b| (i16::from_le_bytes([b[0], b[1]]) as f32 / 32767.0).max(-1.0)
             }
             (DataType::U16, true) => |b| u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0,
+            (DataType::I8, false) if self.quantized => |b| b[0] as i8 as f32,
+            (DataType::U8, false) if self.quantized => |b| b[0] as f32,
+            (DataType::I16, false) if self.quantized => |b| i16::from_le_bytes([b[0], b[1]]) as f32,
+            (DataType::U16, false) if self.quantized => |b| u16::from_le_bytes([b[0], b[1]]) as f32,
             (other, normalized) => {
                 return Err(self.error(
                     accessor,
                     what,
                     format!(
-                        "component type {other:?} (normalized: {normalized}) is not a float type"
+                        "component type {other:?} (normalized: {normalized}) is not a float type \
+                         (integers that are not normalized need KHR_mesh_quantization)"
                     ),
                 ));
             }

@@ -1,7 +1,9 @@
 //! The triangle primitives of one glTF mesh, merged into one vertex and
 //! triangle list with their skinning attributes and morph-target deltas.
 
-use ::gltf::accessor::Dimensions;
+use std::collections::BTreeMap;
+
+use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::mesh::{Mode, Semantic};
 use glam::Vec3;
 use shadow_core::{Error, Result};
@@ -29,14 +31,29 @@ pub(super) struct Geometry {
     pub targets: Vec<MorphTarget>,
     /// Read only for skinned nodes: glTF ignores JOINTS/WEIGHTS without a skin.
     pub influences: Option<RawInfluences>,
+    /// `COLOR_0` and application-specific (`_NAME`) attributes stored as
+    /// floats or normalized integers in every triangle primitive alike.
+    pub attributes: BTreeMap<String, VertexAttribute>,
+    /// The triangle primitives merged, in vertex order: (index in the mesh,
+    /// vertex count).
+    pub primitives: Vec<(usize, usize)>,
     /// Point and line primitives: no surface to shade or to cast a shadow.
     pub skipped_primitives: usize,
     /// Triangle strips and fans turned into triangle lists.
     pub converted_primitives: usize,
 }
 
+/// Per-vertex values of one attribute: `components` floats a vertex.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VertexAttribute {
+    pub components: usize,
+    pub values: Vec<f32>,
+}
+
 /// One primitive read on its own, before merging.
 struct Part {
+    index: usize,
+    attributes: BTreeMap<String, VertexAttribute>,
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
     triangles: Vec<[u32; 3]>,
@@ -88,7 +105,33 @@ pub(super) fn read_mesh(
         ));
     }
 
+    // An attribute some triangle primitive lacks, or stores with another
+    // width, cannot be told per vertex: it is left out.
+    let attributes = first
+        .attributes
+        .iter()
+        .filter(|(name, a)| {
+            parts.iter().all(|p| {
+                p.attributes
+                    .get(*name)
+                    .is_some_and(|b| b.components == a.components)
+            })
+        })
+        .map(|(name, a)| {
+            let values = parts
+                .iter()
+                .flat_map(|p| p.attributes[name].values.iter().copied())
+                .collect();
+            let merged = VertexAttribute {
+                components: a.components,
+                values,
+            };
+            (name.clone(), merged)
+        })
+        .collect();
     let mut geometry = Geometry {
+        attributes,
+        primitives: parts.iter().map(|p| (p.index, p.positions.len())).collect(),
         positions: Vec::with_capacity(vertex_count),
         normals: parts
             .iter()
@@ -175,6 +218,23 @@ fn read_primitive(
         None => None,
     };
 
+    let mut attributes = BTreeMap::new();
+    for (semantic, accessor) in primitive.attributes() {
+        let readable = accessor.data_type() == DataType::F32 || accessor.normalized();
+        if !(readable && matches!(semantic, Semantic::Colors(0) | Semantic::Extras(_))) {
+            continue;
+        }
+        let name = semantic.to_string();
+        let dims = accessor.dimensions();
+        let components = dims.multiplicity();
+        if components > 4 {
+            continue;
+        }
+        let values = buffers.floats(&accessor, &what(&name), dims)?;
+        same_count(&name, values.len() / components)?;
+        attributes.insert(name, VertexAttribute { components, values });
+    }
+
     let indices = match primitive.indices() {
         Some(accessor) => {
             let indices = buffers.uints(&accessor, &what("indices"), Dimensions::Scalar)?;
@@ -253,6 +313,8 @@ fn read_primitive(
         }
     }
     Ok(Part {
+        index: p,
+        attributes,
         positions,
         normals,
         triangles,

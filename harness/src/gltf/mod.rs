@@ -32,20 +32,29 @@
 //!   everywhere ([`Mesh::new`]), and its deformed poses carry none, so they
 //!   are recomputed from the posed positions.
 //!
-//! No `extensionsRequired` entry is supported: Draco and meshopt compression,
-//! quantized attributes and the rest change how geometry is stored, so such a
-//! file is refused by name instead of being read wrongly. Materials, textures,
-//! cameras and lights are not read: the caller gives each object a [`Brdf`].
+//! Of the extensions that change how geometry is stored, the two the common
+//! pipelines write are read: `KHR_mesh_quantization` (attributes as integers,
+//! [`accessor`]) and `EXT_meshopt_compression` (compressed buffer views,
+//! decoded at load time, [`meshopt`]). Any other required extension, Draco
+//! compression among them, is refused by name instead of being read wrongly.
+//! Accessors without a buffer view read as zeros and sparse accessors are
+//! applied (glTF 2.0 §3.6.2.4, §3.6.2.3). Materials, textures, cameras and
+//! lights are not read: the caller gives each object a [`Brdf`]. `COLOR_0`
+//! and application-specific attributes (`_AO`) are kept per object
+//! ([`GltfAsset::vertex_attribute`]), and [`patch`] writes one back.
 
 mod accessor;
 mod animation;
 mod geometry;
 mod hierarchy;
+mod meshopt;
 mod morph;
+pub mod patch;
 mod skin;
 #[cfg(test)]
 mod tests;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -56,6 +65,7 @@ use shadow_core::{Brdf, Error, Frame, Mesh, Object, Pose, Result};
 use accessor::Buffers;
 use animation::Clip;
 use geometry::Geometry;
+pub use geometry::VertexAttribute;
 use hierarchy::Hierarchy;
 use morph::Morph;
 use skin::{Skin, normal_matrix};
@@ -108,9 +118,23 @@ pub struct GltfAsset {
     report: GltfReport,
 }
 
+/// Where an object's vertices are stored in the file: the node that
+/// instances it, that node's mesh, and the mesh's triangle primitives whose
+/// vertices the object holds one after another.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ObjectSource {
+    pub node: usize,
+    pub mesh: usize,
+    /// (primitive index in the mesh, vertex count), in the object's vertex
+    /// order; point and line primitives are not among them.
+    pub primitives: Vec<(usize, usize)>,
+}
+
 /// One node instancing a mesh.
 struct Instance {
     node: usize,
+    source: ObjectSource,
+    attributes: BTreeMap<String, VertexAttribute>,
     label: String,
     mesh: Arc<Mesh>,
     motion: Motion,
@@ -146,16 +170,25 @@ impl GltfAsset {
         let bad = |what: String| Error::format(path, what);
         let raw = ::gltf::Gltf::from_slice_without_validation(&bytes)
             .map_err(|e| bad(format!("not a readable glTF or GLB file: {e}")))?;
-        if let Some(name) = raw.document.extensions_required().next() {
+        if let Some(name) = raw
+            .document
+            .extensions_required()
+            .find(|name| !SUPPORTED_EXTENSIONS.contains(name))
+        {
             return Err(bad(format!(
                 "unsupported extension {name} (listed in extensionsRequired)"
             )));
         }
         let ::gltf::Gltf { document, blob } = raw;
-        let document =
-            ::gltf::Document::from_json(document.into_json()).map_err(|e| bad(e.to_string()))?;
+        let document = validated(document).map_err(bad)?;
         let data = load_buffers(path, &document, blob)?;
-        let buffers = Buffers { path, data: &data };
+        let decoded = meshopt::decode_views(path, &document, &data)?;
+        let buffers = Buffers {
+            path,
+            data: &data,
+            decoded: &decoded,
+            quantized: document.extensions_used().any(|name| name == QUANTIZATION),
+        };
 
         let hierarchy = Hierarchy::new(path, &document)?;
         let target_counts: Vec<usize> = document
@@ -187,13 +220,19 @@ impl GltfAsset {
                 named("mesh", mesh.index(), mesh.name())
             );
             let skin = node.skin();
-            let Some(geometry) = geometry::read_mesh(&buffers, &mesh, &label, skin.is_some())?
+            let Some(mut geometry) = geometry::read_mesh(&buffers, &mesh, &label, skin.is_some())?
             else {
                 report.skipped_meshes += 1;
                 continue;
             };
             report.skipped_primitives += geometry.skipped_primitives;
             report.converted_primitives += geometry.converted_primitives;
+            let source = ObjectSource {
+                node: node.index(),
+                mesh: mesh.index(),
+                primitives: std::mem::take(&mut geometry.primitives),
+            };
+            let attributes = std::mem::take(&mut geometry.attributes);
             let id = Identity {
                 node: node.index(),
                 name: node
@@ -201,6 +240,8 @@ impl GltfAsset {
                     .or(mesh.name())
                     .map_or_else(|| format!("node {}", node.index()), str::to_string),
                 label,
+                source,
+                attributes,
             };
             let animated_weights = clips.iter().any(|c| c.animates_weights(node.index()));
             let determinant = Mat3::from_mat4(rest_world[node.index()]).determinant();
@@ -266,6 +307,18 @@ impl GltfAsset {
     /// The model-space mesh of every object, in object order.
     pub fn meshes(&self) -> impl Iterator<Item = &Arc<Mesh>> {
         self.instances.iter().map(|i| &i.mesh)
+    }
+
+    /// Where each object's vertices are stored in the file, in object order.
+    pub fn sources(&self) -> impl Iterator<Item = &ObjectSource> {
+        self.instances.iter().map(|i| &i.source)
+    }
+
+    /// Object `object`'s per-vertex `COLOR_0` or application-specific
+    /// attribute (`_AO`) as the file stores it, when every one of its
+    /// triangle primitives has it as floats or normalized integers.
+    pub fn vertex_attribute(&self, object: usize, name: &str) -> Option<&VertexAttribute> {
+        self.instances.get(object)?.attributes.get(name)
     }
 
     /// One object per mesh instance, all with the same material.
@@ -480,8 +533,49 @@ impl GltfAsset {
     }
 }
 
+/// `KHR_mesh_quantization`: attributes stored as integers (read by
+/// [`Buffers::floats`]).
+const QUANTIZATION: &str = "KHR_mesh_quantization";
+
+/// The extensions a file may require: they change how geometry is stored,
+/// and the loader reads them. Any other required extension (Draco
+/// compression among them) is refused by name.
+pub const SUPPORTED_EXTENSIONS: [&str; 2] = [QUANTIZATION, meshopt::EXTENSION];
+
+/// `document` checked by the `gltf` crate's validation (every index in
+/// range, required properties present), except for two things that crate
+/// refuses although glTF 2.0 allows them: accessors without a `bufferView`
+/// (zero-filled, §3.6.2.4, which [`Buffers`] reads) and the required
+/// extensions this loader supports.
+fn validated(document: ::gltf::Document) -> std::result::Result<::gltf::Document, String> {
+    use ::gltf::json::validation::{Error as Invalid, Validate};
+    let json = document.into_json();
+    let mut errors = Vec::new();
+    json.validate(&json, ::gltf::json::Path::new, &mut |path, error| {
+        let path = path();
+        let zero_filled = error == Invalid::Missing
+            && path.as_str().starts_with("accessors[")
+            && path.as_str().ends_with("].bufferView");
+        let supported = error == Invalid::Unsupported
+            && path.as_str().starts_with("extensionsRequired[")
+            && SUPPORTED_EXTENSIONS
+                .iter()
+                .any(|name| path.as_str().ends_with(&format!("{name:?}")));
+        if !(zero_filled || supported) {
+            errors.push(format!("{}: {error}", path.as_str()));
+        }
+    });
+    if errors.is_empty() {
+        Ok(::gltf::Document::from_json_without_validation(json))
+    } else {
+        Err(format!("invalid glTF: {}", errors.join(", ")))
+    }
+}
+
 /// The buffers' bytes: the GLB's BIN chunk, external files next to `path`, or
-/// `data:` URIs, each checked to be as long as the file declares.
+/// `data:` URIs, each checked to be as long as the file declares. A fallback
+/// buffer of `EXT_meshopt_compression` without a source stays empty: only
+/// compressed views point into it, and they are decoded from elsewhere.
 fn load_buffers(
     path: &Path,
     document: &::gltf::Document,
@@ -491,6 +585,11 @@ fn load_buffers(
     document
         .buffers()
         .map(|buffer| {
+            if meshopt::is_fallback(&buffer)
+                && matches!(buffer.source(), ::gltf::buffer::Source::Bin)
+            {
+                return Ok(Vec::new());
+            }
             let source = match buffer.source() {
                 ::gltf::buffer::Source::Bin => "the GLB BIN chunk".to_string(),
                 ::gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
@@ -578,11 +677,14 @@ fn default_weights(path: &Path, node: &::gltf::Node, count: usize) -> Result<Vec
     }
 }
 
-/// A mesh instance's node, the name its [`Mesh`] gets, and how errors call it.
+/// A mesh instance's node, the name its [`Mesh`] gets, how errors call it,
+/// and where its vertices and their other attributes are stored.
 struct Identity {
     node: usize,
     name: String,
     label: String,
+    source: ObjectSource,
+    attributes: BTreeMap<String, VertexAttribute>,
 }
 
 /// A validated mesh, its errors naming the file and the node and mesh.
@@ -631,6 +733,8 @@ fn skinned_instance(
     )?;
     Ok(Instance {
         node: id.node,
+        source: id.source,
+        attributes: id.attributes,
         label: id.label,
         mesh,
         motion: Motion::Skinned {
@@ -687,6 +791,8 @@ fn rigid_or_morphed_instance(
     };
     Ok(Instance {
         node: id.node,
+        source: id.source,
+        attributes: id.attributes,
         label: id.label,
         mesh,
         motion,

@@ -716,13 +716,9 @@ fn out_of_range_indices_and_accessors_are_named_errors() {
 }
 
 #[test]
-fn required_extensions_are_refused_by_name() {
+fn required_extensions_are_refused_by_name_unless_supported() {
     let dir = tempfile::tempdir().unwrap();
-    for extension in [
-        "KHR_draco_mesh_compression",
-        "EXT_meshopt_compression",
-        "KHR_mesh_quantization",
-    ] {
+    for extension in ["KHR_draco_mesh_compression", "EXT_made_up"] {
         let mut document = triangle_file(&[0, 1, 2], json!({}));
         document["extensionsUsed"] = json!([extension]);
         document["extensionsRequired"] = json!([extension]);
@@ -732,6 +728,88 @@ fn required_extensions_are_refused_by_name() {
             "{message}"
         );
     }
+    for extension in super::SUPPORTED_EXTENSIONS {
+        let mut document = triangle_file(&[0, 1, 2], json!({}));
+        document["extensionsUsed"] = json!([extension]);
+        document["extensionsRequired"] = json!([extension]);
+        GltfAsset::load(&write(&dir, "supported.gltf", &document)).unwrap();
+    }
+}
+
+#[test]
+fn integer_positions_need_mesh_quantization() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut tiny = Tiny::default();
+    let corners: [u16; 9] = [0, 0, 0, 4, 0, 0, 0, 4, 0];
+    let positions = tiny.u16s(&corners, "VEC3", 3);
+    tiny.accessors[positions]["min"] = json!([0, 0, 0]);
+    tiny.accessors[positions]["max"] = json!([4, 4, 0]);
+    let mut document = tiny.document(json!({
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "scale": [0.25, 0.25, 0.25]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": positions}}]}],
+    }));
+    let message = load_error(&write(&dir, "plain.gltf", &document));
+    assert!(message.contains("KHR_mesh_quantization"), "{message}");
+
+    document["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
+    document["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
+    let asset = GltfAsset::load(&write(&dir, "quantized.gltf", &document)).unwrap();
+    let mesh = asset.meshes().next().unwrap();
+    assert_eq!(mesh.positions()[1], Vec3::new(4.0, 0.0, 0.0));
+    let Pose::Rigid(world) = asset.pose_at(0.0).unwrap()[0] else {
+        panic!("a rigid node")
+    };
+    assert_eq!(world.transform_point3(mesh.positions()[2]), Vec3::Y);
+}
+
+#[test]
+fn accessors_without_a_buffer_view_are_zeros() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut tiny = Tiny::default();
+    let positions = tiny.vec3s(&TRIANGLE);
+    tiny.accessors
+        .push(json!({"componentType": 5126, "type": "VEC3", "count": 3}));
+    let zeros = tiny.accessors.len() - 1;
+    let document = tiny.document(json!({
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": positions}, "targets": [{"POSITION": zeros}]}],
+                    "weights": [1.0]}],
+    }));
+    let asset = GltfAsset::load(&write(&dir, "zeros.gltf", &document)).unwrap();
+    assert_eq!(asset.meshes().next().unwrap().positions(), &TRIANGLE[..]);
+}
+
+#[test]
+fn colours_and_application_attributes_are_read_per_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut tiny = Tiny::default();
+    let positions = tiny.vec3s(&TRIANGLE);
+    let ao = tiny.floats(&[0.25, 0.5, 1.0], "SCALAR", 1);
+    let colours = tiny.floats(&[0.1; 12], "VEC4", 4);
+    let document = tiny.document(json!({
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0}, {"mesh": 1}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": positions, "_AO": ao, "COLOR_0": colours}}]},
+            {"primitives": [
+                {"attributes": {"POSITION": positions, "_AO": ao}},
+                {"attributes": {"POSITION": positions}}
+            ]}
+        ],
+    }));
+    let asset = GltfAsset::load(&write(&dir, "attributes.gltf", &document)).unwrap();
+    let read = asset.vertex_attribute(0, "_AO").unwrap();
+    assert_eq!(
+        (read.components, &read.values[..]),
+        (1, &[0.25, 0.5, 1.0][..])
+    );
+    assert_eq!(asset.vertex_attribute(0, "COLOR_0").unwrap().components, 4);
+    // Object 1's second primitive has no _AO: per vertex it is unknown.
+    assert!(asset.vertex_attribute(1, "_AO").is_none());
+    let sources: Vec<_> = asset.sources().collect();
+    assert_eq!(sources[1].primitives, vec![(0, 3), (1, 3)]);
 }
 
 #[test]

@@ -11,7 +11,7 @@ use std::{
     sync::Arc,
 };
 
-use glam::{Affine3A, Vec3};
+use glam::{Affine3A, Mat3, Vec3};
 use shadow_core::{
     Aabb, Brdf, Camera, Environment, Error, Frame, Mesh, Object, Pose, Result, Scene, shapes,
 };
@@ -103,6 +103,43 @@ pub fn white() -> Brdf {
     }
 }
 
+/// A white Lambert material of `albedo`, which must lie in (0, 1].
+pub fn lambert(albedo: f32) -> Result<Brdf> {
+    if albedo > 0.0 && albedo <= 1.0 {
+        Ok(Brdf::Lambert {
+            albedo: Vec3::splat(albedo),
+        })
+    } else {
+        Err(Error::InvalidScene(format!(
+            "an albedo must lie in (0, 1], got {albedo}"
+        )))
+    }
+}
+
+/// `env` turned about the vertical (+Y) axis by `degrees` (counter-clockwise
+/// seen from above: light that came from +Z comes from +X after 90°) and
+/// its radiance scaled by 2^`ev`; named after both when either is not zero.
+pub fn adjusted(env: Environment, degrees: f32, ev: f32) -> Result<Environment> {
+    if !(degrees.is_finite() && ev.is_finite()) {
+        return Err(Error::InvalidEnvironment {
+            source_name: env.name().to_string(),
+            what: format!("a rotation of {degrees}° and an exposure of {ev} EV must be finite"),
+        });
+    }
+    let mut name = env.name().to_string();
+    let mut env = env;
+    if degrees != 0.0 {
+        name = format!("{name}, turned {degrees}°");
+        env = env.rotated(Mat3::from_rotation_y(degrees.to_radians()));
+    }
+    if ev != 0.0 {
+        name = format!("{name}, {ev:+} EV");
+        let texels = env.texels().iter().map(|t| *t * ev.exp2()).collect();
+        env = Environment::new(env.name(), env.width(), env.height(), texels)?;
+    }
+    Ok(env.renamed(name))
+}
+
 /// Builds a built-in scene by name.
 pub fn builtin(name: &str) -> Result<Scene> {
     let assets = assets_dir().join("meshes");
@@ -116,9 +153,19 @@ pub fn builtin(name: &str) -> Result<Scene> {
             still(name, vec![floor, wall])
         }
         "bunny" => on_floor(name, &assets.join("bunny_npm_1839v.glb"), 1),
-        "bunny-35k" => asset_scene(name, &assets.join("bunny_stanford_bun_zipper.glb"), 1),
-        "human" => asset_scene(name, &assets.join("BCN_Epileptic_skinned_animated.glb"), 6),
-        "teapot" => asset_scene(name, &assets.join("teapot_npm_792v.glb"), 1),
+        "bunny-35k" => asset_scene(
+            name,
+            &assets.join("bunny_stanford_bun_zipper.glb"),
+            1,
+            white(),
+        ),
+        "human" => asset_scene(
+            name,
+            &assets.join("BCN_Epileptic_skinned_animated.glb"),
+            6,
+            white(),
+        ),
+        "teapot" => asset_scene(name, &assets.join("teapot_npm_792v.glb"), 1, white()),
         "cloth" => cloth::scene(name),
         "chess" => chess::scene(name),
         _ => Err(Error::InvalidScene(format!(
@@ -163,16 +210,26 @@ pub fn wall_scene() -> Result<(Mesh, Mesh)> {
     Ok((floor, wall))
 }
 
-/// A scene from a glTF file, animated over at most `frames` frames, white
-/// Lambert, framed by a camera from the front right.
-pub fn asset_scene(name: &str, path: &Path, frames: usize) -> Result<Scene> {
-    let (objects, frames) = load_parts(path, frames)?;
+/// A scene from a glTF file, animated over at most `frames` frames, every
+/// object of `material`, framed by a camera from the front right.
+pub fn asset_scene(name: &str, path: &Path, frames: usize, material: Brdf) -> Result<Scene> {
+    scene_of_asset(name, &GltfAsset::load(path)?, frames, material)
+}
+
+/// [`asset_scene`] of an asset already loaded.
+pub fn scene_of_asset(
+    name: &str,
+    asset: &GltfAsset,
+    frames: usize,
+    material: Brdf,
+) -> Result<Scene> {
+    let (objects, frames) = asset_parts(asset, frames, material)?;
     framed(name, objects, frames)
 }
 
 /// An asset standing on a coarse two-triangle floor.
 fn on_floor(name: &str, path: &Path, frames: usize) -> Result<Scene> {
-    let (mut objects, mut frames) = load_parts(path, frames)?;
+    let (mut objects, mut frames) = asset_parts(&GltfAsset::load(path)?, frames, white())?;
     let bounds = first_frame_bounds(&objects, &frames);
     let size = bounds.extent().max_element();
     let center = Vec3::new(bounds.center().x, bounds.min.y, bounds.center().z);
@@ -189,14 +246,17 @@ fn on_floor(name: &str, path: &Path, frames: usize) -> Result<Scene> {
 
 /// The asset's objects and `frames` frames spread evenly over its first
 /// animation clip (both ends included); one frame if it is not animated.
-fn load_parts(path: &Path, frames: usize) -> Result<(Vec<Object>, Vec<Frame>)> {
-    let asset = GltfAsset::load(path)?;
+fn asset_parts(
+    asset: &GltfAsset,
+    frames: usize,
+    material: Brdf,
+) -> Result<(Vec<Object>, Vec<Frame>)> {
     let fps = if asset.is_animated() && frames > 1 && asset.duration() > 0.0 {
         (frames - 1) as f32 / asset.duration()
     } else {
         30.0
     };
-    asset.to_scene_parts(white(), fps, frames)
+    asset.to_scene_parts(material, fps, frames)
 }
 
 /// Static meshes at the identity pose.
