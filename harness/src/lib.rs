@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod accuracy;
+pub mod bake;
 pub mod baselines;
 pub mod chart;
 pub mod export;

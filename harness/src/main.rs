@@ -10,7 +10,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use harness::{
     accuracy::{self, AccuracyReport, Plan},
-    export, images, methods,
+    bake, export,
+    gltf::{GltfAsset, patch},
+    images, methods,
     reference::{
         self, ImageReference, ReferenceCache, ReferenceSettings, transfer::TransferSettings,
     },
@@ -64,6 +66,51 @@ enum Command {
         out: Option<PathBuf>,
         /// Write what the method computed for the last frame (SH transfer
         /// vectors, or visibility over directions) to this .npz file, for numpy.
+        #[arg(long)]
+        export: Option<PathBuf>,
+    },
+    /// Bake a per-vertex result of your glTF file into a copy of it: ambient
+    /// occlusion, irradiance or radiance of one frame, as a vertex attribute.
+    /// Everything else in the file is kept.
+    Bake {
+        /// Your glTF (.gltf or .glb) file.
+        #[arg(long)]
+        mesh: PathBuf,
+        /// The file to write (.glb, or .gltf with its data in a .bin beside it).
+        #[arg(long)]
+        out: PathBuf,
+        /// What to bake: ambient occlusion (needs `--env uniform`, the
+        /// default), irradiance or outgoing radiance.
+        #[arg(long, value_enum, default_value_t = bake::Quantity::AmbientOcclusion)]
+        quantity: bake::Quantity,
+        /// `reference` (the converged Monte-Carlo estimate) or a method name
+        /// (see `harness list`).
+        #[arg(long, default_value = "reference")]
+        method: String,
+        /// The vertex attribute: `COLOR_0` (ambient occlusion only; viewers
+        /// multiply it into the base colour) or an application-specific
+        /// `_NAME`; default `_AO`, `_IRRADIANCE` or `_RADIANCE`.
+        #[arg(long)]
+        attribute: Option<String>,
+        /// Overwrite the attribute where the file already has it.
+        #[arg(long)]
+        replace: bool,
+        /// Frames to sample from the file's first animation.
+        #[arg(long, default_value_t = 1)]
+        frames: usize,
+        /// The frame to bake, of those sampled.
+        #[arg(long, default_value_t = 0)]
+        frame: usize,
+        /// Albedo of the white Lambert material (matters for radiance only).
+        #[arg(long, default_value_t = 1.0)]
+        albedo: f32,
+        #[command(flatten)]
+        env: EnvArgs,
+        /// Target relative L2 noise of the reference (with `--method reference`).
+        #[arg(long, default_value_t = 0.005)]
+        target: f32,
+        /// Also write what the method computed (its SH transfer, say) to this
+        /// .npz file.
         #[arg(long)]
         export: Option<PathBuf>,
     },
@@ -125,10 +172,37 @@ struct Input {
     /// Frames to sample from the file's animation (with --mesh).
     #[arg(long, default_value_t = 1)]
     frames: usize,
+    /// Albedo of the white Lambert material given to --mesh (default 1: then
+    /// `--env uniform` gives each vertex's ambient occlusion itself).
+    #[arg(long, requires = "mesh")]
+    albedo: Option<f32>,
+    #[command(flatten)]
+    env: EnvArgs,
+}
+
+#[derive(Args)]
+struct EnvArgs {
     /// An environment name (see `harness list`; `uniform` gives ambient occlusion)
-    /// or an OpenEXR file; default: the scene's own.
+    /// or an OpenEXR (.exr) or Radiance (.hdr) lat-long map; default: the scene's own.
     #[arg(long)]
     env: Option<String>,
+    /// Turns the environment about the vertical (+Y) axis by this many degrees
+    /// (positive: counter-clockwise seen from above).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    env_rotate: f32,
+    /// Scales the environment's radiance by 2^EV.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure: f32,
+}
+
+impl EnvArgs {
+    /// The environment named by --env (else `default`), turned and exposed.
+    fn load(&self, default: &str) -> Result<Environment> {
+        let name = self.env.as_deref().unwrap_or(default);
+        let env =
+            scenes::environment(name).with_context(|| format!("loading environment {name}"))?;
+        Ok(scenes::adjusted(env, self.env_rotate, self.exposure)?)
+    }
 }
 
 #[derive(Args)]
@@ -201,14 +275,13 @@ impl Input {
                 let name = path
                     .file_stem()
                     .map_or("mesh".into(), |s| s.to_string_lossy().into_owned());
-                (scenes::asset_scene(&name, path, self.frames)?, "uniform")
+                let material = scenes::lambert(self.albedo.unwrap_or(1.0))?;
+                let scene = scenes::asset_scene(&name, path, self.frames, material)?;
+                (scene, "uniform")
             }
             (None, None) => bail!("give --scene or --mesh"),
         };
-        let env_name = self.env.as_deref().unwrap_or(default_env);
-        let env = scenes::environment(env_name)
-            .with_context(|| format!("loading environment {env_name}"))?;
-        Ok((scene, env))
+        Ok((scene, self.env.load(default_env)?))
     }
 }
 
@@ -463,6 +536,96 @@ fn main() -> Result<()> {
             if let Some(dir) = &image.images {
                 images::write_scene(dir, scene.name(), &image_refs[last].image, &[&result])?;
                 println!("wrote the images in {}", dir.join(scene.name()).display());
+            }
+        }
+        Command::Bake {
+            mesh,
+            out,
+            quantity,
+            method,
+            attribute,
+            replace,
+            frames,
+            frame,
+            albedo,
+            env,
+            target,
+            export: export_path,
+        } => {
+            for path in std::iter::once(&out).chain(&export_path) {
+                check_output(path)?;
+            }
+            let attribute = attribute.unwrap_or_else(|| quantity.default_attribute().into());
+            let spec = patch::AttributeSpec::new(&attribute, replace)?;
+            let environment = env.load("uniform")?;
+            quantity.check(&environment, &attribute)?;
+            let asset = GltfAsset::load(&mesh)?;
+            let name = mesh
+                .file_stem()
+                .map_or("mesh".into(), |s| s.to_string_lossy().into_owned());
+            let scene = scenes::scene_of_asset(&name, &asset, frames, scenes::lambert(albedo)?)?;
+            if frame >= scene.frames().len() {
+                bail!(
+                    "--frame {frame}: {} has {} frames (sample more with --frames)",
+                    mesh.display(),
+                    scene.frames().len()
+                );
+            }
+            let start = Instant::now();
+            let (radiance, exported) = if method == "reference" {
+                if export_path.is_some() {
+                    bail!("the reference has nothing to export: name a method");
+                }
+                let settings = ReferenceSettings {
+                    target_noise: Some(target),
+                    ..ReferenceSettings::CONVERGED
+                };
+                let bar = progress(&format!("reference {name}"));
+                let r = bake::reference_frame(&scene, &environment, frame, &settings, &bar)?;
+                bar.finish_and_clear();
+                println!("reference: relative noise {:.3}%", r.noise * 100.0);
+                (r.radiance, None)
+            } else {
+                let gpu = methods::SharedGpu::new();
+                let mut m = methods::by_name(&method, &gpu)?;
+                let radiance = bake::method_frame(m.as_mut(), &scene, &environment, frame)?;
+                let exported = export_path.as_ref().map(|_| m.export()).transpose()?;
+                (radiance, exported)
+            };
+            let values = quantity.values(&radiance, albedo);
+            let sources: Vec<_> = asset.sources().cloned().collect();
+            let summary = patch::write_with_attribute(&mesh, &out, &sources, &values, &spec)?;
+            let all: Vec<f32> = values
+                .iter()
+                .flat_map(|v| v.values.iter().copied())
+                .collect();
+            let mean = all.iter().map(|&v| f64::from(v)).sum::<f64>() / all.len().max(1) as f64;
+            println!(
+                "{quantity:?} of {} under {}, frame {frame}, by {method} in {:.1} s: \
+                 mean {mean:.4}, min {:.4}, max {:.4}",
+                mesh.display(),
+                environment.name(),
+                start.elapsed().as_secs_f64(),
+                all.iter().copied().fold(f32::INFINITY, f32::min),
+                all.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+            );
+            println!(
+                "wrote {} with {attribute} on {} primitives ({} meshes copied for their \
+                 instances, {} attributes replaced)",
+                out.display(),
+                summary.primitives,
+                summary.copied_meshes,
+                summary.replaced
+            );
+            if let (Some(path), Some(exported)) = (export_path, exported) {
+                let geometry = scene.frame_geometry(frame)?;
+                let from = export::Provenance {
+                    method: &method,
+                    scene: &scene,
+                    frame: &geometry,
+                };
+                export::write_npz(&path, &exported, from)?;
+                println!("wrote {}", path.display());
             }
         }
         Command::Report {
