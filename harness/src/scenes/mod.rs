@@ -310,6 +310,35 @@ mod tests {
     use super::*;
 
     #[test]
+    fn adjusting_turns_about_the_vertical_and_scales_by_stops() {
+        // One bright texel on the horizon toward +Z.
+        let (w, h) = (64, 32);
+        let mut texels = vec![Vec3::ZERO; w * h];
+        let (row, col) = Environment::new("dark", w, h, texels.clone())
+            .unwrap()
+            .texel_of(Vec3::Z);
+        texels[row * w + col] = Vec3::ONE;
+        let env = Environment::new("sun", w, h, texels).unwrap();
+        let turned = adjusted(env.clone(), 90.0, 1.0).unwrap();
+        assert_eq!(turned.name(), "sun, turned 90°, +1 EV");
+        let (r, c) = turned.texel_of(Vec3::X);
+        assert_eq!(turned.texel(r, c), Vec3::splat(2.0));
+        approx::assert_relative_eq!(turned.integral(), env.integral() * 2.0, max_relative = 1e-5);
+        let same = adjusted(env.clone(), 0.0, 0.0).unwrap();
+        assert_eq!(same.name(), "sun");
+        assert!(adjusted(env.clone(), f32::NAN, 0.0).is_err());
+        assert!(adjusted(env, 0.0, f32::INFINITY).is_err());
+    }
+
+    #[test]
+    fn albedos_lie_in_the_unit_interval() {
+        assert!(lambert(1.0).is_ok() && lambert(0.2).is_ok());
+        for bad in [0.0, -0.5, 1.5, f32::NAN] {
+            assert!(lambert(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
     fn every_builtin_scene_builds_with_its_environment() {
         for spec in SCENES {
             let scene = builtin(spec.name).unwrap();
