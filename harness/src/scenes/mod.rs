@@ -5,6 +5,7 @@
 
 mod chess;
 mod cloth;
+pub mod stress;
 
 use std::{
     path::{Path, PathBuf},

@@ -1,0 +1,693 @@
+//! The stability atlas's stress scenes: small scenes, each built to break
+//! something a shadow method relies on (a depth bias, a ray offset, horizon
+//! clipping, back-face culling, f32 precision at extreme scales, per-vertex
+//! resolution, SH truncation under a point-like light).
+//!
+//! Each is small (28 to about 1500 vertices) so that a converged reference
+//! takes seconds, and comes with the environment it is meant to be seen
+//! under. Only `interpenetrating` moves (4 frames); the others have 1.
+
+use std::{
+    collections::HashMap,
+    f32::consts::{PI, TAU},
+    sync::Arc,
+};
+
+use glam::{Affine3A, Vec2, Vec3};
+use shadow_core::{
+    Environment, Error, Frame, Mesh, Object, Pose, Result, Scene, environment::luminance, shapes,
+};
+
+use super::{framed, still, white};
+
+/// A stress scene, what it is built to break, and its environment.
+#[derive(Clone, Debug)]
+pub struct StressScene {
+    pub name: &'static str,
+    /// One sentence: what the scene is built to break.
+    pub breaks: &'static str,
+    pub scene: Scene,
+    pub environment: Environment,
+}
+
+/// Every stress scene's name and what it is built to break.
+pub const STRESS_SCENES: &[(&str, &str)] = &[
+    (
+        "thin-sheets",
+        "depth biases and ray offsets: a box 1 mm thick and two parallel faces 2 mm apart over a floor must shadow it without leaking light or shadowing themselves",
+    ),
+    (
+        "horizon-blocker",
+        "horizon clipping: a long wall 2 cm high at the far edge of a floor, lit mostly by a band just above the horizon, blocks light that arrives within a few degrees of the receivers' tangent plane",
+    ),
+    (
+        "interpenetrating",
+        "closed-mesh assumptions: a sphere moving through a box over 4 frames buries vertices of each inside the other, where only back faces are seen",
+    ),
+    (
+        "near-contact",
+        "contact offsets: a sphere resting 1e-3 of its radius above a floor and another touching it at a floor vertex",
+    ),
+    (
+        "tiny-scale",
+        "absolute epsilons: a sphere on a floor 1 mm across",
+    ),
+    (
+        "huge-scale",
+        "absolute epsilons and f32 precision: a sphere on a floor 10 km across",
+    ),
+    (
+        "slivers",
+        "triangle quality: a fan of needle triangles (aspect ratio above 1e3) with zero-area triangles among them hovers over a floor",
+    ),
+    (
+        "coarse",
+        "per-vertex resolution: a 12-triangle box on a 2-triangle floor, whose contact shadow falls between vertices",
+    ),
+    (
+        "sun-only",
+        "SH truncation and sampling: a sphere on a floor under a black sky with one small sun holding all the light",
+    ),
+];
+
+/// The kept triangles of the `slivers` fan: needles from one apex to 500
+/// points along an edge 1 m away and 0.4 m long (8e-4 m apart).
+pub const SLIVER_NEEDLES: usize = 500;
+
+/// The zero-area triangles given to the `slivers` fan, which validation drops:
+/// collinear triples along its far edge, repeated indices, and one spanned by
+/// two distinct vertices at the same place.
+pub const SLIVER_DEGENERATE: usize = SLIVER_NEEDLES / 2 + 3 + 1;
+
+/// Overall size (largest extent of the bounds) of `tiny-scale` and
+/// `huge-scale`, metres.
+pub const TINY_SIZE: f32 = 1e-3;
+pub const HUGE_SIZE: f32 = 1e4;
+
+/// Every stress scene, in [`STRESS_SCENES`] order.
+pub fn stress_scenes() -> Result<Vec<StressScene>> {
+    STRESS_SCENES
+        .iter()
+        .map(|(name, _)| stress_scene(name))
+        .collect()
+}
+
+/// A stress scene by name.
+pub fn stress_scene(name: &str) -> Result<StressScene> {
+    let Some(&(name, breaks)) = STRESS_SCENES.iter().find(|(n, _)| *n == name) else {
+        return Err(Error::InvalidScene(format!(
+            "unknown stress scene {name:?}; stress scenes are {}",
+            STRESS_SCENES
+                .iter()
+                .map(|s| s.0)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    };
+    let uniform = || Environment::uniform(Vec3::ONE).renamed("uniform");
+    let (scene, environment) = match name {
+        "thin-sheets" => (thin_sheets(name)?, uniform()),
+        "horizon-blocker" => (horizon_blocker(name)?, horizon_band()?),
+        "interpenetrating" => (interpenetrating(name)?, uniform()),
+        "near-contact" => (near_contact(name)?, uniform()),
+        "tiny-scale" => (still(name, sphere_on_floor(TINY_SIZE, 15)?)?, uniform()),
+        "huge-scale" => (still(name, sphere_on_floor(HUGE_SIZE, 15)?)?, uniform()),
+        "slivers" => (slivers(name)?, uniform()),
+        "coarse" => (coarse(name)?, uniform()),
+        "sun-only" => (still(name, sphere_on_floor(1.0, 31)?)?, sun()?),
+        _ => unreachable!("every listed stress scene is built"),
+    };
+    Ok(StressScene {
+        name,
+        breaks,
+        scene,
+        environment,
+    })
+}
+
+/// A floor 2 m across (16×16 cells), a box 1 mm thick at its left and two
+/// parallel faces 2 mm apart (the lower facing down, the upper up, nothing
+/// between them at the edges) at its right, both 0.25 m above it.
+fn thin_sheets(name: &str) -> Result<Scene> {
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 16)?;
+    let slab = closed_box(
+        "slab-1mm",
+        Vec3::new(-0.8, 0.25, -0.4),
+        Vec3::new(-0.1, 0.251, 0.4),
+        [8, 1, 8],
+    )?;
+    let (y0, y1) = (0.25, 0.252);
+    let (x0, x1, z0, z1) = (0.1f32, 0.8f32, -0.4f32, 0.4f32);
+    let cells = 8;
+    let (dx, dz) = ((x1 - x0) / cells as f32, (z1 - z0) / cells as f32);
+    // The lower face: X × Z points down; the upper: Z × X points up.
+    let lower = shapes::grid(
+        "lower",
+        Vec3::new(x0, y0, z0),
+        Vec3::X * dx,
+        Vec3::Z * dz,
+        cells,
+        cells,
+    )?;
+    let upper = shapes::grid(
+        "upper",
+        Vec3::new(x0, y1, z0),
+        Vec3::Z * dz,
+        Vec3::X * dx,
+        cells,
+        cells,
+    )?;
+    let faces = joined("faces-2mm", &[lower, upper])?;
+    still(name, vec![floor, slab, faces])
+}
+
+/// A floor 2 m across (24×24 cells) and, near its far edge (x from 0.84 to
+/// 0.9 m, the whole depth), a closed wall 2 cm high: its top stands 0.6°
+/// above the horizon of the floor's farthest vertices, under 5° for most.
+fn horizon_blocker(name: &str) -> Result<Scene> {
+    // 24 cells put floor vertices at x = 0.833 and 0.917: the wall stands
+    // between them, burying none.
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 24)?;
+    let wall = closed_box(
+        "wall",
+        Vec3::new(0.84, 0.0, -1.0),
+        Vec3::new(0.9, 0.02, 1.0),
+        [1, 1, 24],
+    )?;
+    still(name, vec![floor, wall])
+}
+
+/// The light of `horizon-blocker`: a dim sky (0.05) and a band 20 times
+/// brighter than a white sky from the horizon to 4.3° above it (three rows of
+/// a 256×128 map).
+fn horizon_band() -> Result<Environment> {
+    procedural("horizon-band", 256, 128, |d| {
+        let elevation = d.y.asin().to_degrees();
+        if (0.0..4.3).contains(&elevation) {
+            Vec3::splat(20.0)
+        } else {
+            Vec3::splat(0.05)
+        }
+    })
+}
+
+/// A box (0.5 m, 6×6 cells a face) turning about +Y and a sphere (radius
+/// 0.3 m) moving through it along X over 4 frames: in every frame each is
+/// pushed into the other by at least 0.1 m.
+fn interpenetrating(name: &str) -> Result<Scene> {
+    let cube = closed_box("box", Vec3::splat(-0.25), Vec3::splat(0.25), [6, 6, 6])?;
+    let sphere = sphere("sphere", Vec3::ZERO, 0.3)?;
+    let objects = vec![object(cube), object(sphere)];
+    let frames = (0..4)
+        .map(|i| {
+            let t = i as f32 / 3.0;
+            Frame {
+                time: 0.1 * i as f32,
+                poses: vec![
+                    Pose::Rigid(Affine3A::from_rotation_y(0.3 * t)),
+                    Pose::Rigid(Affine3A::from_translation(Vec3::new(
+                        -0.45 + 0.9 * t,
+                        0.05,
+                        0.0,
+                    ))),
+                ],
+            }
+        })
+        .collect();
+    framed(name, objects, frames)
+}
+
+/// Radius of the `near-contact` spheres.
+const CONTACT_RADIUS: f32 = 0.25;
+
+/// A floor 2 m across (20×20 cells, a vertex every 0.1 m), a sphere whose
+/// lowest point (its pole vertex) hangs 1e-3 of its radius above the floor
+/// vertex at x = −0.5, and one whose pole sits on the floor vertex at x = 0.5.
+fn near_contact(name: &str) -> Result<Scene> {
+    let r = CONTACT_RADIUS;
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 20)?;
+    let lifted = sphere("sphere-lifted", Vec3::new(-0.5, r * (1.0 + 1e-3), 0.0), r)?;
+    let touching = sphere("sphere-touching", Vec3::new(0.5, r, 0.0), r)?;
+    still(name, vec![floor, lifted, touching])
+}
+
+/// A floor `size` across (`cells`×`cells`, odd so that no floor vertex lies
+/// under the contact) and a sphere of radius 0.2 `size` resting on its centre.
+fn sphere_on_floor(size: f32, cells: u32) -> Result<Vec<Mesh>> {
+    let r = 0.2 * size;
+    let floor = shapes::floor("floor", Vec3::ZERO, 0.5 * size, cells)?;
+    Ok(vec![floor, sphere("sphere", Vec3::new(0.0, r, 0.0), r)?])
+}
+
+/// A floor 2 m across (16×16 cells) and 0.3 m above it a flat fan facing up:
+/// [`SLIVER_NEEDLES`] needles from an apex at x = −0.5 to points 8e-4 m
+/// apart along the edge x = 0.5, z ∈ [−0.2, 0.2], and [`SLIVER_DEGENERATE`]
+/// zero-area triangles that validation drops.
+fn slivers(name: &str) -> Result<Scene> {
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 16)?;
+    let fan = sliver_fan()?;
+    debug_assert_eq!(fan.report().degenerate_triangles, SLIVER_DEGENERATE);
+    still(name, vec![floor, fan])
+}
+
+fn sliver_fan() -> Result<Mesh> {
+    let (height, half_width) = (0.3, 0.2);
+    let n = SLIVER_NEEDLES as u32;
+    let apex = Vec3::new(-0.5, height, 0.0);
+    let mut positions = vec![apex];
+    positions.extend((0..=n).map(|i| {
+        let z = -half_width + 2.0 * half_width * i as f32 / n as f32;
+        Vec3::new(0.5, height, z)
+    }));
+    // A second vertex at the apex's place.
+    let twin = positions.len() as u32;
+    positions.push(apex);
+    let edge = |i: u32| 1 + i;
+    // (apex, q_{i+1}, q_i) winds counter-clockwise seen from above.
+    let mut triangles: Vec<[u32; 3]> = (0..n).map(|i| [0, edge(i + 1), edge(i)]).collect();
+    // Zero area: three points of the straight far edge, ...
+    triangles.extend((0..n / 2).map(|i| [edge(2 * i), edge(2 * i + 1), edge(2 * i + 2)]));
+    // ... a vertex repeated, ...
+    triangles.extend([
+        [0, 0, edge(1)],
+        [edge(3), edge(4), edge(4)],
+        [edge(7), 0, edge(7)],
+    ]);
+    // ... and two distinct vertices at one place.
+    triangles.push([0, twin, edge(n / 2)]);
+    Mesh::new("fan", positions, None, triangles)
+}
+
+/// A two-triangle floor 2 m across and a 12-triangle box (0.6 × 0.5 × 0.6 m)
+/// standing on its centre: the floor's only vertices are its corners.
+fn coarse(name: &str) -> Result<Scene> {
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 1)?;
+    let cube = shapes::cuboid(
+        "box",
+        Vec3::new(-0.3, 0.0, -0.3),
+        Vec3::new(0.3, 0.5, 0.3),
+        false,
+    )?;
+    still(name, vec![floor, cube])
+}
+
+/// Direction toward the sun of `sun-only`: 40° above the horizon.
+pub fn sun_direction() -> Vec3 {
+    let elevation = 40f32.to_radians();
+    let azimuth = 0.3 * TAU;
+    Vec3::new(
+        elevation.cos() * azimuth.cos(),
+        elevation.sin(),
+        elevation.cos() * azimuth.sin(),
+    )
+}
+
+/// Angular radius of the sun disc, radians.
+const SUN_RADIUS: f32 = 0.035;
+
+/// Black but for a sun disc of angular radius 2° (about eight texels of a
+/// 256×128 map) of radiance 1000: about 4 W·m⁻² on a surface facing it,
+/// as much as a white sky of radiance 1.3 gives.
+fn sun() -> Result<Environment> {
+    let (w, h) = (256, 128);
+    let toward = sun_direction();
+    let mut env = procedural("sun", w, h, |d| {
+        if d.dot(toward) >= SUN_RADIUS.cos() {
+            Vec3::splat(1000.0)
+        } else {
+            Vec3::ZERO
+        }
+    })?;
+    if env.texels().iter().all(|t| *t == Vec3::ZERO) {
+        // Never at this size; kept so that a smaller map still has a sun.
+        let (row, col) = env.texel_of(toward);
+        let mut texels = env.texels().to_vec();
+        texels[row * w + col] = Vec3::splat(1000.0);
+        env = Environment::new("sun", w, h, texels)?;
+    }
+    Ok(env)
+}
+
+/// A `w`×`h` lat-long map with `radiance` evaluated at every texel's centre.
+fn procedural(
+    name: &str,
+    w: usize,
+    h: usize,
+    radiance: impl Fn(Vec3) -> Vec3,
+) -> Result<Environment> {
+    let blank = Environment::new(name, w, h, vec![Vec3::ZERO; w * h])?;
+    let texels = (0..w * h)
+        .map(|i| radiance(blank.direction(i / w, i % w)))
+        .collect();
+    Environment::new(name, w, h, texels)
+}
+
+/// A closed axis-aligned box facing out, each face a grid of `cells` (along
+/// X, Y, Z) quads, faces sharing the vertices of their common edges (so that
+/// [`Mesh::is_closed`] holds; normals are area-weighted, flat inside a face).
+fn closed_box(name: &str, min: Vec3, max: Vec3, cells: [u32; 3]) -> Result<Mesh> {
+    // The vertex at lattice point `c`, the far side exactly at `max`.
+    let at = |c: [u32; 3]| {
+        Vec3::from_array(std::array::from_fn(|a| {
+            if c[a] == cells[a] {
+                max[a]
+            } else {
+                min[a] + (max[a] - min[a]) * c[a] as f32 / cells[a] as f32
+            }
+        }))
+    };
+    let mut index: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut positions = Vec::new();
+    let mut vertex = |c: [u32; 3]| {
+        *index.entry(c).or_insert_with(|| {
+            positions.push(at(c));
+            positions.len() as u32 - 1
+        })
+    };
+    // (fixed axis, on its far side?, u axis, v axis) with e_u × e_v outward.
+    let faces = [
+        (0, false, 2, 1),
+        (0, true, 1, 2),
+        (1, false, 0, 2),
+        (1, true, 2, 0),
+        (2, false, 1, 0),
+        (2, true, 0, 1),
+    ];
+    let mut triangles = Vec::new();
+    for (axis, far, u, v) in faces {
+        let corner = |i: u32, j: u32| {
+            let mut c = [0; 3];
+            c[axis] = if far { cells[axis] } else { 0 };
+            c[u] = i;
+            c[v] = j;
+            c
+        };
+        for i in 0..cells[u] {
+            for j in 0..cells[v] {
+                let [a, b, c, d] = [
+                    corner(i, j),
+                    corner(i + 1, j),
+                    corner(i + 1, j + 1),
+                    corner(i, j + 1),
+                ]
+                .map(&mut vertex);
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+    }
+    Mesh::new(name, positions, None, triangles)
+}
+
+/// A closed sphere (a lathed semicircle: one vertex per pole, the seam
+/// shared) of 16 rings and 32 segments, 482 vertices.
+fn sphere(name: &str, center: Vec3, radius: f32) -> Result<Mesh> {
+    let rings = 16;
+    let profile: Vec<Vec2> = (0..=rings)
+        .map(|k| {
+            let theta = PI * k as f32 / rings as f32;
+            let x = if k == 0 || k == rings {
+                0.0
+            } else {
+                theta.sin()
+            };
+            Vec2::new(x, -theta.cos()) * radius
+        })
+        .collect();
+    let mesh = shapes::lathe(name, &profile, 32)?;
+    let positions = mesh.positions().iter().map(|p| *p + center).collect();
+    mesh.with_pose(positions, Some(mesh.normals().to_vec()))
+}
+
+/// One mesh of several, each part keeping its vertices and normals.
+fn joined(name: &str, parts: &[Mesh]) -> Result<Mesh> {
+    let (mut positions, mut normals, mut triangles) = (Vec::new(), Vec::new(), Vec::new());
+    for part in parts {
+        let base = positions.len() as u32;
+        positions.extend_from_slice(part.positions());
+        normals.extend_from_slice(part.normals());
+        triangles.extend(part.triangles().iter().map(|t| t.map(|i| i + base)));
+    }
+    Mesh::new(name, positions, Some(normals), triangles)
+}
+
+fn object(mesh: Mesh) -> Object {
+    Object {
+        mesh: Arc::new(mesh),
+        material: white(),
+    }
+}
+
+/// Longest edge over shortest altitude, `L² / 2A`: 2/√3 for an equilateral
+/// triangle, infinite for a zero-area one.
+pub fn aspect_ratio([a, b, c]: [Vec3; 3]) -> f32 {
+    let longest = (b - a)
+        .length_squared()
+        .max((c - b).length_squared())
+        .max((a - c).length_squared());
+    longest / (b - a).cross(c - a).length()
+}
+
+/// The smallest set of texels, brightest per solid angle first, that holds
+/// `fraction` of the environment's luminance integral: its solid angle, sr.
+pub fn solid_angle_holding(env: &Environment, fraction: f32) -> f32 {
+    let mut texels: Vec<(f32, f32)> = (0..env.height())
+        .flat_map(|row| {
+            let omega = env.solid_angle(row);
+            (0..env.width()).map(move |col| (row, col, omega))
+        })
+        .map(|(row, col, omega)| (luminance(env.texel(row, col)), omega))
+        .collect();
+    texels.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let total: f64 = texels.iter().map(|(l, w)| (*l * *w) as f64).sum();
+    let (mut held, mut omega) = (0.0f64, 0.0f32);
+    for (l, w) in texels {
+        if held >= fraction as f64 * total {
+            break;
+        }
+        held += (l * w) as f64;
+        omega += w;
+    }
+    omega
+}
+
+#[cfg(test)]
+mod tests {
+    use std::f32::consts::PI;
+
+    use super::*;
+
+    fn bounds(scene: &Scene) -> shadow_core::Aabb {
+        scene.frame_geometry(0).unwrap().bounds()
+    }
+
+    #[test]
+    fn every_stress_scene_builds_small_with_its_frames() {
+        let all = stress_scenes().unwrap();
+        assert_eq!(all.len(), STRESS_SCENES.len());
+        for stress in &all {
+            let scene = &stress.scene;
+            assert_eq!(scene.name(), stress.name);
+            assert!(!stress.breaks.is_empty());
+            let frames = if stress.name == "interpenetrating" {
+                4
+            } else {
+                1
+            };
+            assert_eq!(scene.frames().len(), frames, "{}", stress.name);
+            assert!(!scene.deforms(), "{}", stress.name);
+            let vertices = scene.vertex_count();
+            let small = if stress.name == "coarse" {
+                20..=40
+            } else {
+                200..=3000
+            };
+            assert!(small.contains(&vertices), "{}: {vertices}", stress.name);
+            for f in 0..frames {
+                let geometry = scene.frame_geometry(f).unwrap();
+                assert!(geometry.bounds().diagonal().is_finite());
+            }
+        }
+        let msg = stress_scene("nonesuch").unwrap_err().to_string();
+        assert!(msg.contains("thin-sheets"), "{msg}");
+    }
+
+    #[test]
+    fn scales_are_as_stated() {
+        for (name, size) in [
+            ("tiny-scale", TINY_SIZE),
+            ("huge-scale", HUGE_SIZE),
+            ("near-contact", 2.0),
+            ("sun-only", 1.0),
+        ] {
+            let b = bounds(&stress_scene(name).unwrap().scene);
+            let extent = b.extent().max_element();
+            approx::assert_relative_eq!(extent, size, max_relative = 1e-5);
+            assert_eq!(b.min.y, 0.0, "{name} rests on y = 0");
+        }
+        // The tiny and huge scenes are the same scene 1e7 apart.
+        let tiny = stress_scene("tiny-scale").unwrap().scene;
+        let huge = stress_scene("huge-scale").unwrap().scene;
+        assert_eq!(tiny.vertex_count(), huge.vertex_count());
+        for (t, h) in tiny.objects().iter().zip(huge.objects()) {
+            for (pt, ph) in t.mesh.positions().iter().zip(h.mesh.positions()) {
+                approx::assert_relative_eq!(*pt * 1e7, *ph, max_relative = 1e-4, epsilon = 1e-3);
+            }
+        }
+    }
+
+    #[test]
+    fn thin_sheets_are_1_and_2_mm_apart() {
+        let scene = stress_scene("thin-sheets").unwrap().scene;
+        let thickness = |o: usize| scene.objects()[o].mesh.bounds().extent().y;
+        approx::assert_relative_eq!(thickness(1), 1e-3, max_relative = 1e-3);
+        approx::assert_relative_eq!(thickness(2), 2e-3, max_relative = 1e-3);
+        assert!(scene.objects()[1].mesh.is_closed());
+        let faces = &scene.objects()[2].mesh;
+        assert!(!faces.is_closed());
+        // The lower face faces down, the upper up.
+        for (p, n) in faces.positions().iter().zip(faces.normals()) {
+            let up = if p.y > 0.251 { 1.0 } else { -1.0 };
+            assert!(n.abs_diff_eq(Vec3::Y * up, 1e-6), "{p}: {n}");
+        }
+    }
+
+    #[test]
+    fn the_horizon_wall_stays_within_degrees_of_the_floor_plane() {
+        let scene = stress_scene("horizon-blocker").unwrap().scene;
+        let (floor, wall) = (&scene.objects()[0].mesh, &scene.objects()[1].mesh);
+        assert!(wall.is_closed());
+        let wall_bounds = wall.bounds();
+        let elevations: Vec<f32> = floor
+            .positions()
+            .iter()
+            .map(|p| {
+                let inside = (wall_bounds.min.x..=wall_bounds.max.x).contains(&p.x);
+                assert!(!inside, "floor vertex {p} is under the wall");
+                let distance = (wall_bounds.min.x - p.x).max(p.x - wall_bounds.max.x);
+                (wall_bounds.max.y / distance).atan().to_degrees()
+            })
+            .collect();
+        let lowest = elevations.iter().copied().fold(f32::INFINITY, f32::min);
+        let low = elevations.iter().filter(|e| **e < 5.0).count();
+        assert!(lowest < 1.0, "{lowest}°");
+        assert!(
+            low * 4 > elevations.len() * 3,
+            "{low} of {}",
+            elevations.len()
+        );
+        // Most of the light a floor vertex receives comes from the band.
+        let env = stress_scene("horizon-blocker").unwrap().environment;
+        let (mut band, mut all) = (0.0, 0.0);
+        for row in 0..env.height() {
+            let d = env.direction(row, 0);
+            let irradiance = env.texel(row, 0).x * d.y.max(0.0) * env.solid_angle(row);
+            all += irradiance;
+            if d.y < 0.08 {
+                band += irradiance;
+            }
+        }
+        assert!(band > 0.5 * all, "{band} of {all}");
+    }
+
+    #[test]
+    fn the_interpenetrating_objects_overlap_in_every_frame() {
+        let scene = stress_scene("interpenetrating").unwrap().scene;
+        assert!(scene.moves());
+        let mut centres = Vec::new();
+        for f in 0..scene.frames().len() {
+            let g = scene.frame_geometry(f).unwrap();
+            let to_box = g.objects[0].transform.unwrap().inverse();
+            let centre = g.objects[1].bounds().center();
+            // Sphere vertices inside the box, and box vertices inside the sphere.
+            let inside_box = g.objects[1]
+                .positions()
+                .iter()
+                .map(|p| to_box.transform_point3(*p))
+                .filter(|p| p.abs().max_element() < 0.25)
+                .count();
+            let inside_sphere = g.objects[0]
+                .positions()
+                .iter()
+                .filter(|p| p.distance(centre) < 0.3)
+                .count();
+            assert!(inside_box > 0 && inside_sphere > 0, "frame {f}");
+            centres.push(centre.x);
+        }
+        assert!(centres.windows(2).all(|w| w[1] > w[0]), "{centres:?}");
+    }
+
+    #[test]
+    fn near_contact_gaps_are_as_stated() {
+        let scene = stress_scene("near-contact").unwrap().scene;
+        let floor = &scene.objects()[0].mesh;
+        for (o, gap) in [(1, CONTACT_RADIUS * 1e-3), (2, 0.0)] {
+            let sphere = &scene.objects()[o].mesh;
+            let lowest = sphere
+                .positions()
+                .iter()
+                .min_by(|a, b| a.y.total_cmp(&b.y))
+                .unwrap();
+            approx::assert_relative_eq!(lowest.y, gap, epsilon = 1e-7);
+            // A floor vertex lies right under the sphere's lowest point.
+            assert!(
+                floor
+                    .positions()
+                    .iter()
+                    .any(|p| (p.x - lowest.x).abs() < 1e-6 && p.z.abs() < 1e-6),
+                "{lowest}"
+            );
+        }
+    }
+
+    #[test]
+    fn slivers_are_needles_and_the_degenerate_triangles_were_dropped() {
+        let scene = stress_scene("slivers").unwrap().scene;
+        let fan = &scene.objects()[1].mesh;
+        assert_eq!(fan.triangle_count(), SLIVER_NEEDLES);
+        assert_eq!(fan.report().degenerate_triangles, SLIVER_DEGENERATE);
+        for t in fan.triangles() {
+            let aspect = aspect_ratio(t.map(|i| fan.positions()[i as usize]));
+            assert!(aspect >= 1e3, "{t:?}: aspect {aspect}");
+        }
+        assert!(fan.normals().iter().all(|n| n.abs_diff_eq(Vec3::Y, 1e-5)));
+        let equilateral = [Vec3::ZERO, Vec3::X, Vec3::new(0.5, 0.0, -0.75f32.sqrt())];
+        approx::assert_relative_eq!(
+            aspect_ratio(equilateral),
+            2.0 / 3f32.sqrt(),
+            max_relative = 1e-5
+        );
+    }
+
+    #[test]
+    fn coarse_is_two_floor_triangles_and_a_twelve_triangle_box() {
+        let scene = stress_scene("coarse").unwrap().scene;
+        let counts: Vec<usize> = scene
+            .objects()
+            .iter()
+            .map(|o| o.mesh.triangle_count())
+            .collect();
+        assert_eq!(counts, [2, 12]);
+    }
+
+    #[test]
+    fn the_sun_holds_the_light_of_the_sun_only_sky() {
+        let env = stress_scene("sun-only").unwrap().environment;
+        let total = luminance(env.integral());
+        assert!(total > 1.0, "{total}");
+        let omega = solid_angle_holding(&env, 0.95);
+        assert!(omega <= 0.01 * 4.0 * PI, "{omega} sr");
+        // The sun is a few texels, toward its stated direction.
+        let lit: Vec<(usize, usize)> = (0..env.height())
+            .flat_map(|r| (0..env.width()).map(move |c| (r, c)))
+            .filter(|&(r, c)| env.texel(r, c) != Vec3::ZERO)
+            .collect();
+        assert!((1..=32).contains(&lit.len()), "{} texels", lit.len());
+        for (r, c) in lit {
+            assert!(env.direction(r, c).dot(sun_direction()) > 0.99);
+        }
+        // A uniform sky spreads its light: 95% needs 95% of the sphere.
+        let uniform = Environment::uniform(Vec3::ONE);
+        assert!(solid_angle_holding(&uniform, 0.95) > 0.9 * 4.0 * PI);
+    }
+}
