@@ -133,6 +133,149 @@ fn draw(
     Ok(())
 }
 
+/// One method family's sweep on one scene: its settings in order of cost.
+#[derive(Clone, Debug)]
+pub struct Curve {
+    pub family: String,
+    /// (setting label, error in percent, milliseconds per frame).
+    pub points: Vec<(String, f64, f64)>,
+    /// The line to beat (the ray tracer): drawn black and dashed.
+    pub baseline: bool,
+}
+
+impl Curve {
+    /// The points no other point of the curve beats on both time and error
+    /// (the family's Pareto frontier), as a mask over `points`.
+    pub fn frontier(&self) -> Vec<bool> {
+        let p = &self.points;
+        (0..p.len())
+            .map(|i| {
+                !(0..p.len()).any(|j| {
+                    j != i
+                        && p[j].1 <= p[i].1
+                        && p[j].2 <= p[i].2
+                        && (p[j].1 < p[i].1 || p[j].2 < p[i].2)
+                })
+            })
+            .collect()
+    }
+}
+
+/// Draws one scene's sweeps as a log-log chart of time per frame against
+/// error, one curve per family through its settings, each family's frontier
+/// marked by filled points (dominated settings hollow), the baseline dashed,
+/// and the reference's noise as a grey band below which errors cannot be
+/// told apart. Written as PNG to `png` and SVG to `svg`, atomically.
+pub fn pareto(
+    curves: &[Curve],
+    noise_percent: Option<f64>,
+    axes: Axes,
+    png: &Path,
+    svg: &Path,
+) -> Result<()> {
+    let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
+    draw_pareto(root, curves, noise_percent, axes)
+        .map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
+    let mut encoded = Vec::new();
+    PngEncoder::new(&mut encoded)
+        .write_image(&rgb, WIDTH, HEIGHT, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::format(png, format!("encoding the chart: {e}")))?;
+    write_atomic(png, &encoded)?;
+    let mut text = String::new();
+    let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
+    draw_pareto(root, curves, noise_percent, axes)
+        .map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
+    write_atomic(svg, text.as_bytes())
+}
+
+fn draw_pareto<DB: DrawingBackend>(
+    root: DrawingArea<DB, plotters::coord::Shift>,
+    curves: &[Curve],
+    noise_percent: Option<f64>,
+    axes: Axes,
+) -> std::result::Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    register_font()?;
+    let all = || curves.iter().flat_map(|c| c.points.iter());
+    let xy = |p: &(String, f64, f64)| (p.1.max(1e-3), p.2.max(1e-3));
+    let (x_min, x_max) = bounds(all().map(|p| xy(p).0).chain(noise_percent));
+    let (y_min, y_max) = bounds(all().map(|p| xy(p).1));
+    // Headroom above the slowest point for the legend.
+    let y_max = y_max * 8.0;
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(axes.title, ("sans-serif", 24))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d((x_min..x_max).log_scale(), (y_min..y_max).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc(axes.error)
+        .y_desc(axes.time)
+        .label_style(("sans-serif", 15))
+        .draw()?;
+    if let Some(noise) = noise_percent.filter(|n| *n > x_min) {
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x_min, y_min), (noise, y_max)],
+                BLACK.mix(0.08).filled(),
+            )))?
+            .label("reference noise: errors below cannot be told apart")
+            .legend(|(x, y)| {
+                Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], BLACK.mix(0.15).filled())
+            });
+    }
+    let mut colour = 0;
+    for curve in curves {
+        let color = if curve.baseline {
+            BLACK.to_rgba()
+        } else {
+            colour += 1;
+            Palette99::pick(colour - 1).to_rgba()
+        };
+        let points: Vec<(f64, f64)> = curve.points.iter().map(xy).collect();
+        let mut sorted = points.clone();
+        sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let line = if curve.baseline {
+            chart.draw_series(DashedLineSeries::new(sorted, 8, 5, color.stroke_width(2)))?
+        } else {
+            chart.draw_series(LineSeries::new(sorted, color.stroke_width(2)))?
+        };
+        line.label(curve.family.clone()).legend(move |(x, y)| {
+            PathElement::new(vec![(x - 10, y), (x + 10, y)], color.stroke_width(2))
+        });
+        let frontier = curve.frontier();
+        chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
+            let style = if best {
+                color.filled()
+            } else {
+                color.stroke_width(2)
+            };
+            Circle::new(p, 6, style)
+        }))?;
+        chart.draw_series(curve.points.iter().zip(&points).map(|(p, &(x, y))| {
+            Text::new(
+                p.0.clone(),
+                (x * 1.05, y * 1.05),
+                ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
+            )
+        }))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 15))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
 /// A log-scale range holding every value with a margin.
 fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
@@ -148,6 +291,45 @@ fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_frontier_keeps_what_nothing_beats_on_both_axes() {
+        let curve = Curve {
+            family: "f".into(),
+            points: vec![
+                ("a".into(), 10.0, 1.0),
+                ("b".into(), 5.0, 2.0),
+                ("c".into(), 6.0, 3.0), // beaten by b on both
+                ("d".into(), 1.0, 9.0),
+                ("e".into(), 5.0, 2.0), // ties b: neither beats the other
+            ],
+            baseline: false,
+        };
+        assert_eq!(curve.frontier(), vec![true, true, false, true, true]);
+    }
+
+    #[test]
+    fn pareto_charts_are_written_as_png_and_svg() {
+        let dir = tempfile::tempdir().unwrap();
+        let (png, svg) = (dir.path().join("c.png"), dir.path().join("c.svg"));
+        let curves = [
+            Curve {
+                family: "raytrace".into(),
+                points: vec![("4".into(), 20.0, 3.0), ("16".into(), 9.0, 12.0)],
+                baseline: true,
+            },
+            Curve {
+                family: "hemi-raster".into(),
+                points: vec![("pvs".into(), 3.0, 0.5)],
+                baseline: false,
+            },
+        ];
+        pareto(&curves, Some(0.5), Axes::RADIANCE, &png, &svg).unwrap();
+        let img = image::load_from_memory(&std::fs::read(&png).unwrap()).unwrap();
+        assert_eq!((img.width(), img.height()), (WIDTH, HEIGHT));
+        let text = std::fs::read_to_string(&svg).unwrap();
+        assert!(text.starts_with("<svg") && text.contains("hemi-raster"));
+    }
 
     fn point(series: &str, label: &str, error_percent: f64, frame_ms: f64) -> Point {
         Point {

@@ -15,3 +15,4 @@ pub mod report;
 pub mod run;
 pub mod scenes;
 pub mod score;
+pub mod suite;

@@ -16,11 +16,12 @@ use harness::{
     reference::{
         self, ImageReference, ReferenceCache, ReferenceSettings, transfer::TransferSettings,
     },
-    report::{ImageReferenceInfo, MachineInfo, ReferenceInfo, Report, STRIP_SCENE},
+    report::{self, ImageReferenceInfo, MachineInfo, ReferenceInfo, Report, STRIP_SCENE},
     run::{self, References},
     scenes::{self, ENVIRONMENTS, SCENES},
+    suite::Suite,
 };
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use shadow_core::{Camera, Environment, Scene, raster::MAX_IMAGE_SIZE};
 
 #[derive(Parser)]
@@ -116,7 +117,19 @@ enum Command {
     },
     /// Run every method on every built-in scene and write report.md and report.json.
     Report {
-        /// Only these scenes (comma separated); default all.
+        /// How much to run: `quick` (four small scenes, a few settings a
+        /// method: minutes), `default` (every built-in scene, each method
+        /// swept over its settings), `full` (also the settings that take
+        /// minutes per frame).
+        #[arg(long, value_enum, default_value_t = Suite::Default)]
+        suite: Suite,
+        /// Shorthand for `--suite quick`.
+        #[arg(long, conflicts_with_all = ["suite", "full"])]
+        quick: bool,
+        /// Shorthand for `--suite full`.
+        #[arg(long, conflicts_with = "suite")]
+        full: bool,
+        /// Only these scenes of the suite (comma separated).
         #[arg(long, value_delimiter = ',')]
         scenes: Vec<String>,
         /// Where to write the report.
@@ -285,8 +298,8 @@ impl Input {
     }
 }
 
-fn progress(label: &str) -> ProgressBar {
-    let bar = ProgressBar::new(0);
+fn progress(label: &str, multi: &MultiProgress) -> ProgressBar {
+    let bar = multi.add(ProgressBar::new(0));
     bar.set_style(
         ProgressStyle::with_template(
             "{msg:>24} [{elapsed_precise}] {wide_bar} {percent}% eta {eta}",
@@ -301,8 +314,9 @@ fn references(
     scene: &Scene,
     env: &Environment,
     args: &EstimatorArgs,
+    multi: &MultiProgress,
 ) -> Result<(Vec<reference::VertexReference>, ReferenceInfo)> {
-    let bar = progress(&format!("reference {}", scene.name()));
+    let bar = progress(&format!("reference {}", scene.name()), multi);
     let start = Instant::now();
     let cache = ReferenceCache::new(&args.cache);
     let (refs, cached) =
@@ -339,8 +353,9 @@ fn image_references(
     camera: &Camera,
     settings: &ReferenceSettings,
     args: &EstimatorArgs,
+    multi: &MultiProgress,
 ) -> Result<(Vec<ImageReference>, ImageReferenceInfo)> {
-    let bar = progress(&format!("image reference {}", scene.name()));
+    let bar = progress(&format!("image reference {}", scene.name()), multi);
     let start = Instant::now();
     let cache = ReferenceCache::new(&args.cache);
     let (refs, cached) =
@@ -376,6 +391,7 @@ fn check_output(path: &Path) -> Result<()> {
 }
 
 fn main() -> Result<()> {
+    let multi = MultiProgress::new();
     match Cli::parse().command {
         Command::List => {
             println!("scenes:");
@@ -397,7 +413,7 @@ fn main() -> Result<()> {
             out,
         } => {
             let (scene, env) = input.load()?;
-            let (refs, info) = references(&scene, &env, &estimator)?;
+            let (refs, info) = references(&scene, &env, &estimator, &multi)?;
             println!(
                 "{} under {}: {} frames, {} vertices, relative noise {:.3}%, {} rays, {}",
                 info.scene,
@@ -439,7 +455,7 @@ fn main() -> Result<()> {
                     shadow_core::Capability::Export
                 );
             }
-            let (refs, info) = references(&scene, &env, &estimator)?;
+            let (refs, info) = references(&scene, &env, &estimator, &multi)?;
             let camera = image.camera(&scene)?;
             let (image_refs, image_info) = image_references(
                 &scene,
@@ -447,6 +463,7 @@ fn main() -> Result<()> {
                 &camera,
                 &image.settings(&estimator),
                 &estimator,
+                &multi,
             )?;
             let references = References {
                 vertex: &refs,
@@ -580,7 +597,7 @@ fn main() -> Result<()> {
                     target_noise: Some(target),
                     ..ReferenceSettings::CONVERGED
                 };
-                let bar = progress(&format!("reference {name}"));
+                let bar = progress(&format!("reference {name}"), &multi);
                 let r = bake::reference_frame(&scene, &environment, frame, &settings, &bar)?;
                 bar.finish_and_clear();
                 println!("reference: relative noise {:.3}%", r.noise * 100.0);
@@ -629,35 +646,64 @@ fn main() -> Result<()> {
             }
         }
         Command::Report {
+            suite,
+            quick,
+            full,
             scenes: chosen,
             dir,
             estimator,
             repeats,
             image,
         } => {
-            let specs: Vec<_> = SCENES
-                .iter()
-                .filter(|s| chosen.is_empty() || chosen.iter().any(|c| c == s.name))
+            let suite = match (quick, full) {
+                (true, _) => Suite::Quick,
+                (_, true) => Suite::Full,
+                _ => suite,
+            };
+            let names: Vec<&str> = suite
+                .scenes()
+                .into_iter()
+                .filter(|s| chosen.is_empty() || chosen.iter().any(|c| c == s))
                 .collect();
-            if specs.is_empty() {
-                bail!("no built-in scene matches {chosen:?}");
+            if names.is_empty() {
+                bail!("no scene of the {suite:?} suite matches {chosen:?}");
             }
+            let families = suite.families();
             let gpu = methods::SharedGpu::new();
             let mut report = Report {
                 machine: MachineInfo::detect(None),
+                settings: report::Settings {
+                    suite,
+                    target_noise: estimator.target,
+                    image_target_noise: image.image_target,
+                    image_width: image.width,
+                    repeats,
+                    seed: estimator.seed,
+                },
                 references: Vec::new(),
+                families: families.clone(),
                 runs: Vec::new(),
                 skipped: Vec::new(),
                 strip: None,
             };
-            for spec in specs {
-                let scene = scenes::builtin(spec.name)?;
-                let env = scenes::environment(spec.environment)?;
-                let (refs, mut info) = references(&scene, &env, &estimator)?;
+            let settings_count: usize = families.iter().map(|f| f.methods.len()).sum();
+            let overall = multi.add(ProgressBar::new((names.len() * settings_count) as u64));
+            overall.set_style(
+                ProgressStyle::with_template(
+                    "{msg:>40} [{elapsed_precise}] {wide_bar} {pos}/{len} runs",
+                )
+                .expect("valid template"),
+            );
+            for name in names {
+                let spec = SCENES.iter().find(|s| s.name == name);
+                let scene = scenes::builtin(name)?;
+                let env = scenes::environment(spec.map_or("uniform", |s| s.environment))?;
+                overall.set_message(format!("references of {name}"));
+                let (refs, mut info) = references(&scene, &env, &estimator, &multi)?;
                 let camera = image.camera(&scene)?;
                 let settings = image.settings(&estimator);
                 let (image_refs, image_info) =
-                    image_references(&scene, &env, &camera, &settings, &estimator)?;
+                    image_references(&scene, &env, &camera, &settings, &estimator, &multi)?;
                 info.image = Some(image_info);
                 report.references.push(info);
                 let references = References {
@@ -665,46 +711,53 @@ fn main() -> Result<()> {
                     image: Some((&camera, &image_refs)),
                 };
                 let first_run = report.runs.len();
-                for name in methods::REPORT_METHODS {
-                    let mut m = methods::by_name(name, &gpu)?;
-                    match run::run(m.as_mut(), &scene, &env, references, repeats) {
-                        Ok(result) => {
-                            eprintln!(
-                                "{:<10} {:<20} error {:.2}% per vertex, {} per pixel",
-                                spec.name,
-                                name,
-                                result.mean_error() * 100.0,
-                                result
-                                    .mean_image_error()
-                                    .map_or("–".into(), |e| format!("{:.2}%", e * 100.0))
-                            );
-                            report.runs.push(result);
+                for family in &families {
+                    for setting in &family.methods {
+                        overall.set_message(format!("{name}: {setting}"));
+                        let mut m = methods::by_name(setting, &gpu)?;
+                        match run::run(m.as_mut(), &scene, &env, references, repeats) {
+                            Ok(result) => {
+                                multi.println(format!(
+                                    "{name:<10} {setting:<28} error {:.2}% per vertex, {} per pixel",
+                                    result.mean_error() * 100.0,
+                                    result
+                                        .mean_image_error()
+                                        .map_or("–".into(), |e| format!("{:.2}%", e * 100.0))
+                                ))?;
+                                report.runs.push(report::ReportRun {
+                                    family: family.name.to_string(),
+                                    setting: setting.to_string(),
+                                    result,
+                                });
+                            }
+                            Err(e @ shadow_core::Error::Unsupported { .. }) => {
+                                report.skipped.push(report::Skipped {
+                                    method: setting.to_string(),
+                                    scene: name.to_string(),
+                                    why: e.to_string(),
+                                });
+                            }
+                            Err(e) => {
+                                return Err(e).with_context(|| format!("{setting} on {name}"));
+                            }
                         }
-                        Err(e @ shadow_core::Error::Unsupported { .. }) => {
-                            report.skipped.push((
-                                name.to_string(),
-                                spec.name.to_string(),
-                                e.to_string(),
-                            ));
-                        }
-                        Err(e) => {
-                            return Err(e).with_context(|| format!("{name} on {}", spec.name));
-                        }
+                        overall.inc(1);
                     }
                 }
-                let runs: Vec<_> = report.runs[first_run..].iter().collect();
+                let runs: Vec<_> = report.runs[first_run..].iter().map(|r| &r.result).collect();
                 if let (Some(images_dir), Some(reference)) = (&image.images, image_refs.last()) {
                     images::write_scene(images_dir, scene.name(), &reference.image, &runs)?;
                 }
-                if let (true, Some(reference)) = (spec.name == STRIP_SCENE, image_refs.last()) {
+                if let (true, Some(reference)) = (name == STRIP_SCENE, image_refs.last()) {
                     images::write_scene(&dir.join("strip"), scene.name(), &reference.image, &runs)?;
                     report.strip = Some(scene.name().to_string());
                 }
             }
+            overall.finish_and_clear();
             report.machine.adapter = gpu.adapter();
             report.write(&dir)?;
             println!(
-                "wrote report.md, report.json and the speed-vs-error charts in {}",
+                "wrote index.html, report.md, report.json, report.csv and the charts in {}",
                 dir.display()
             );
         }
@@ -762,8 +815,8 @@ fn main() -> Result<()> {
                 });
                 let environment = scenes::environment(env_name)
                     .with_context(|| format!("loading environment {env_name}"))?;
-                let (refs, info) = references(&scene, &environment, &estimator)?;
-                let bar = progress(&format!("accuracy {name}"));
+                let (refs, info) = references(&scene, &environment, &estimator, &multi)?;
+                let bar = progress(&format!("accuracy {name}"), &multi);
                 let result = accuracy::evaluate(&scene, &environment, &refs, info, &plan, &bar)
                     .with_context(|| format!("accuracy on {name}"))?;
                 bar.finish_and_clear();

@@ -24,7 +24,7 @@ use shadow_core::{
 
 use crate::{
     reference::{ImageReference, VertexReference},
-    score::{self, ErrorStats},
+    score::{self, ErrorStats, Temporal},
 };
 
 /// Seconds of stage time per frame after which repeats stop.
@@ -65,6 +65,9 @@ pub struct FrameResult {
     pub vertices: usize,
     /// Error over the reference image's covered pixels, when images were scored.
     pub image: Option<ErrorStats>,
+    /// How the per-vertex error changed since the previous frame (none on
+    /// the first).
+    pub temporal: Option<Temporal>,
     pub times: StageTimes,
     /// The method's own breakdown of its stages, each entry's median over the
     /// repeats (relight's from the first frame).
@@ -114,6 +117,16 @@ impl RunResult {
     pub fn image_frame_seconds(&self) -> Option<f64> {
         let times: Option<Vec<f64>> = self.frames.iter().map(|f| f.times.image_frame()).collect();
         times.filter(|t| !t.is_empty()).map(median)
+    }
+
+    /// The worst frame-to-frame change of the per-vertex error, with the
+    /// reference's own change and noise floor on that frame; `None` for a
+    /// single frame.
+    pub fn worst_temporal(&self) -> Option<Temporal> {
+        self.frames
+            .iter()
+            .filter_map(|f| f.temporal)
+            .max_by(|a, b| a.error_change.total_cmp(&b.error_change))
     }
 
     /// The fraction of vertices the method evaluated, over all frames.
@@ -247,6 +260,10 @@ pub fn run_inspecting(
             vertex: score::vertices(&shading, vertex_reference),
             vertices: geometry.objects.iter().map(|o| o.vertex_count()).sum(),
             image: image_error,
+            temporal: last_shading
+                .as_ref()
+                .zip(index.checked_sub(1).map(|i| &references.vertex[i]))
+                .map(|previous| score::temporal(previous, (&shading, vertex_reference))),
             times: StageTimes {
                 prepare,
                 relight,

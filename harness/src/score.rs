@@ -97,6 +97,51 @@ pub fn image(image: &Image, reference: &ImageReference) -> Result<ErrorStats> {
     Ok(compare(&values, &expected, se.as_deref()))
 }
 
+/// How much a method's per-vertex error changes from one frame to the next:
+/// what the eye sees as flicker or popping (lightsphere levels switching,
+/// visible sets changing, map aliasing), which a low mean error can hide.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Temporal {
+    /// `sqrt(Σ|e_t − e_{t−1}|² / Σ|r_t|²)` with `e = x − r` per vertex, over
+    /// the vertices evaluated in both frames.
+    pub error_change: f32,
+    /// The same of the reference itself, `sqrt(Σ|r_t − r_{t−1}|² / Σ|r_t|²)`:
+    /// how much the true shading moves between the two frames.
+    pub reference_change: f32,
+    /// The part of `error_change` the references' noise explains:
+    /// `sqrt(n_t² + n_{t−1}²)`, their relative L2 noises combined.
+    pub noise_floor: f32,
+}
+
+/// [`Temporal`] between the previous frame's shading and reference and this
+/// frame's (same scene, so the same vertices).
+pub fn temporal(
+    previous: (&VertexRadiance, &VertexReference),
+    current: (&VertexRadiance, &VertexReference),
+) -> Temporal {
+    let evaluated = |s: &VertexRadiance| -> Vec<bool> { s.flat_evaluated().collect() };
+    let (was, is) = (evaluated(previous.0), evaluated(current.0));
+    let (mut change, mut truth, mut norm) = (0.0f64, 0.0f64, 0.0f64);
+    let rows = previous
+        .0
+        .flat()
+        .zip(previous.1.radiance.flat())
+        .zip(current.0.flat().zip(current.1.radiance.flat()));
+    for (i, ((x0, r0), (x1, r1))) in rows.enumerate() {
+        norm += f64::from(r1.length_squared());
+        truth += f64::from((r1 - r0).length_squared());
+        if was[i] && is[i] {
+            change += f64::from(((x1 - r1) - (x0 - r0)).length_squared());
+        }
+    }
+    let relative = |x: f64| (x / norm.max(f64::MIN_POSITIVE)).sqrt() as f32;
+    Temporal {
+        error_change: relative(change),
+        reference_change: relative(truth),
+        noise_floor: previous.1.noise.hypot(current.1.noise),
+    }
+}
+
 /// Compares `values` with `reference` element by element; `std_error` is the
 /// reference's standard error per element, if known.
 pub fn compare(values: &[Vec3], reference: &[Vec3], std_error: Option<&[Vec3]>) -> ErrorStats {
@@ -153,6 +198,33 @@ fn percentile(sorted: &[f32], q: f64) -> f32 {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    fn reference(values: Vec<Vec3>, noise: f32) -> VertexReference {
+        VertexReference {
+            radiance: VertexRadiance::new(vec![values]),
+            replicates: Vec::new(),
+            rays: 0,
+            noise,
+            seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_steady_bias_does_not_flicker_and_a_switching_one_does() {
+        let (r0, r1) = (vec![Vec3::ONE; 4], vec![Vec3::splat(1.1); 4]);
+        let refs = (reference(r0.clone(), 0.003), reference(r1.clone(), 0.004));
+        let shifted =
+            |r: &[Vec3], by: f32| VertexRadiance::new(vec![r.iter().map(|v| *v + by).collect()]);
+        let steady = temporal((&shifted(&r0, 0.2), &refs.0), (&shifted(&r1, 0.2), &refs.1));
+        assert_relative_eq!(steady.error_change, 0.0, epsilon = 1e-6);
+        assert_relative_eq!(steady.reference_change, 0.1 / 1.1, epsilon = 1e-5);
+        assert_relative_eq!(steady.noise_floor, 0.005, epsilon = 1e-6);
+        let popping = temporal(
+            (&shifted(&r0, 0.2), &refs.0),
+            (&shifted(&r1, -0.2), &refs.1),
+        );
+        assert_relative_eq!(popping.error_change, 0.4 / 1.1, epsilon = 1e-5);
+    }
 
     #[test]
     fn identical_values_score_zero() {

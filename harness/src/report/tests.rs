@@ -1,0 +1,154 @@
+use super::*;
+use crate::run::StageTimes;
+use crate::score::Temporal;
+use shadow_core::{Capabilities, Profile};
+
+fn stats(error: f32) -> ErrorStats {
+    ErrorStats {
+        relative_l2: error,
+        p99: 2.0 * error,
+        max: 3.0 * error,
+        reference_noise: 0.005,
+        count: 100,
+    }
+}
+
+fn run(scene: &str, family: &str, setting: &str, error: f32, ms: f64) -> ReportRun {
+    let frames = (0..2)
+        .map(|frame| FrameResult {
+            frame,
+            vertex: stats(error),
+            vertices: 100,
+            image: Some(stats(error * 1.5)),
+            temporal: (frame > 0).then_some(Temporal {
+                error_change: error / 4.0,
+                reference_change: 0.1,
+                noise_floor: 0.007,
+            }),
+            times: StageTimes {
+                prepare: 0.1,
+                relight: 0.01,
+                update: ms / 2e3,
+                shade: ms / 2e3,
+                render: Some(ms / 1e3),
+            },
+            profile: Profile::default(),
+        })
+        .collect();
+    ReportRun {
+        family: family.into(),
+        setting: setting.into(),
+        result: RunResult {
+            method: setting.replace([':', '='], "-"),
+            scene: scene.into(),
+            environment: "forest".into(),
+            capabilities: Capabilities::ALL,
+            image_size: Some((16, 12)),
+            frames,
+            last_shading: None,
+            last_image: None,
+        },
+    }
+}
+
+fn report() -> Report {
+    let suite = Suite::Quick;
+    let reference = |scene: &str| ReferenceInfo {
+        scene: scene.into(),
+        environment: "forest".into(),
+        frames: 2,
+        vertices: 100,
+        noise: 0.004,
+        rays: 1000,
+        seconds: 1.0,
+        cached: false,
+        image: Some(ImageReferenceInfo {
+            width: 16,
+            height: 12,
+            pixels: 150,
+            noise: 0.009,
+            rays: 1000,
+            seconds: 1.0,
+            cached: true,
+        }),
+    };
+    Report {
+        machine: MachineInfo::detect(Some("llvmpipe (LLVM 15.0.7, 256 bits)".into())),
+        settings: Settings {
+            suite,
+            target_noise: 0.005,
+            image_target_noise: 0.01,
+            image_width: 16,
+            repeats: 1,
+            seed: 7,
+        },
+        references: vec![reference("bunny"), reference("human")],
+        families: suite.families(),
+        runs: vec![
+            run("bunny", RAY_TRACER, "raytrace:4", 0.2, 3.0),
+            run("bunny", RAY_TRACER, "raytrace:16", 0.1, 12.0),
+            run("bunny", "hemi-raster", "hemi-raster", 0.05, 2.0),
+            run("bunny", "hemi-raster", "hemi-raster:pvs", 0.05, 1.0),
+            run("human", "occlusion-query", "occlusion-query:k=18", 0.3, 5.0),
+        ],
+        skipped: vec![Skipped {
+            method: "hemi-raster".into(),
+            scene: "human".into(),
+            why: "does not support deforming meshes".into(),
+        }],
+        strip: None,
+    }
+}
+
+#[test]
+fn the_report_writes_every_file_with_a_row_per_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = report();
+    report.write(dir.path()).unwrap();
+    for file in ["report.json", "report.md", "report.csv", "index.html"] {
+        assert!(dir.path().join(file).is_file(), "{file}");
+    }
+    for chart in ["bunny-vertex", "bunny-image", "human-vertex"] {
+        let png = std::fs::read(dir.path().join(format!("charts/{chart}.png"))).unwrap();
+        assert!(image::load_from_memory(&png).is_ok(), "{chart}");
+        let svg = std::fs::read_to_string(dir.path().join(format!("charts/{chart}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg"), "{chart}");
+    }
+    let csv = std::fs::read_to_string(dir.path().join("report.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + report.runs.len());
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(json["runs"].as_array().unwrap().len(), report.runs.len());
+    assert_eq!(json["runs"][0]["family"], RAY_TRACER);
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("software-rasterized"));
+    assert!(md.contains("hemi-raster on human: does not support deforming meshes"));
+    assert!(md.contains("![bunny: time against error](charts/bunny-vertex.png)"));
+    let html = std::fs::read_to_string(dir.path().join("index.html")).unwrap();
+    assert!(html.contains("data:image/png;base64,") && !html.contains("[missing"));
+}
+
+#[test]
+fn frontiers_and_summary_name_the_best_settings() {
+    let report = report();
+    let table = report.table_of(report.runs_of("bunny"), false);
+    let frontier = table.header.iter().position(|h| h == "frontier").unwrap();
+    let setting = table.header.iter().position(|h| h == "setting").unwrap();
+    let on: Vec<&str> = table
+        .rows
+        .iter()
+        .filter(|r| r[frontier].contains("vertex"))
+        .map(|r| r[setting].as_str())
+        .collect();
+    // hemi-raster: the visible sets give the same error faster.
+    assert_eq!(on, vec!["raytrace:4", "raytrace:16", "hemi-raster:pvs"]);
+    let summary = report.summary().unwrap();
+    let bunny = &summary.rows[0];
+    let hemi = summary
+        .header
+        .iter()
+        .position(|h| h == "hemi-raster")
+        .unwrap();
+    assert!(bunny[hemi].starts_with("5.00% at"), "{}", bunny[hemi]);
+    assert_eq!(summary.rows[1][hemi], "–");
+}

@@ -1,0 +1,199 @@
+//! `harness report --quick`, as CI runs it: every method has a row per scene
+//! it supports (or says why not), every number is finite and agrees with a
+//! recomputation from the JSON, the charts decode, and the page opens in
+//! headless Chromium without errors and shows its charts.
+
+mod support;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use harness::suite::Suite;
+use serde_json::Value;
+use support::harness;
+
+/// Runs the quick suite once into a temporary folder (references to looser
+/// noise than the default, so that a debug build finishes in minutes).
+fn quick_report() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("reports");
+    harness(&[
+        "report",
+        "--quick",
+        "--dir",
+        out.to_str().unwrap(),
+        "--cache",
+        dir.path().join("cache").to_str().unwrap(),
+        "--target",
+        "0.02",
+        "--image-target",
+        "0.03",
+        "--image",
+        "64",
+        "--repeats",
+        "1",
+    ])
+    .unwrap();
+    (dir, out)
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = values.collect();
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+#[test]
+fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
+    let (_keep, out) = quick_report();
+    let json: Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let runs = json["runs"].as_array().unwrap();
+    let skipped = json["skipped"].as_array().unwrap();
+
+    // A row per scene and setting, or a reason naming what is missing.
+    let mut seen = BTreeSet::new();
+    for scene in Suite::Quick.scenes() {
+        for family in Suite::Quick.families() {
+            for setting in family.methods {
+                let ran = runs
+                    .iter()
+                    .any(|r| r["scene"] == scene && r["setting"] == setting);
+                let refused = skipped
+                    .iter()
+                    .find(|s| s["scene"] == scene && s["method"] == setting);
+                assert!(
+                    ran || refused.is_some(),
+                    "{setting} on {scene}: neither run nor refused"
+                );
+                if let Some(s) = refused {
+                    let why = s["why"].as_str().unwrap();
+                    assert!(why.contains("support"), "{setting} on {scene}: {why}");
+                }
+                seen.insert((scene, setting));
+            }
+        }
+    }
+    assert_eq!(runs.len() + skipped.len(), seen.len());
+
+    // Every error is finite and the table's figure is the JSON's frames'.
+    let csv = std::fs::read_to_string(out.join("report.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(rows.len(), runs.len());
+    for (run, row) in runs.iter().zip(&rows) {
+        let frames = run["frames"].as_array().unwrap();
+        let errors = frames
+            .iter()
+            .map(|f| f["vertex"]["relative_l2"].as_f64().unwrap());
+        assert!(errors.clone().all(f64::is_finite), "{run:#}");
+        let recomputed = 100.0 * mean(errors);
+        let written: f64 = row[column("vertex error")]
+            .split('%')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(
+            (written - recomputed).abs() <= 0.006,
+            "{} on {}: table {written}%, frames {recomputed}%",
+            run["setting"],
+            run["scene"]
+        );
+        for f in frames {
+            if let Some(image) = f["image"].as_object() {
+                assert!(image["relative_l2"].as_f64().unwrap().is_finite());
+            }
+            for stage in ["update", "shade"] {
+                assert!(f["times"][stage].as_f64().unwrap() >= 0.0);
+            }
+        }
+    }
+
+    // The figures decode, and the page embeds them all.
+    let mut charts = 0;
+    for entry in std::fs::read_dir(out.join("charts")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "png") {
+            image::load_from_memory(&std::fs::read(&path).unwrap())
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            charts += 1;
+        }
+    }
+    assert!(charts >= 2 * Suite::Quick.scenes().len());
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(!html.contains("[missing"));
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for scene in Suite::Quick.scenes() {
+        assert!(md.contains(&format!("## Scene: {scene}")), "{scene}");
+    }
+
+    browser_check(&out.join("index.html"));
+}
+
+/// Opens the page in headless Chromium: no console or page errors, every
+/// image decoded, and a screenshot of the first chart that shows a chart.
+fn browser_check(page: &Path) {
+    let tools = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/browser");
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    if !tools.join("node_modules/playwright-core").exists() || !Path::new(&chromium).exists() {
+        let why = format!(
+            "Chromium ({chromium}) or playwright-core (npm ci --prefix {}) is not installed",
+            tools.display()
+        );
+        assert!(std::env::var_os("CI").is_none(), "{why}");
+        eprintln!("skipped the browser check: {why}");
+        return;
+    }
+    let shot = page.with_file_name("first-chart.png");
+    let out = Command::new("node")
+        .arg(tools.join("check-page.mjs"))
+        .arg(page)
+        .arg(&shot)
+        .env("CHROMIUM", &chromium)
+        .output()
+        .expect("run node");
+    assert!(
+        out.status.success(),
+        "check-page failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(seen["problems"], serde_json::json!([]), "{seen:#}");
+    let images = seen["images"].as_array().unwrap();
+    assert!(!images.is_empty());
+    for image in images {
+        assert!(image["width"].as_u64().unwrap() > 0, "not decoded: {image}");
+    }
+    assert!(
+        seen["headings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|h| h == "Summary")
+    );
+    // A chart: mostly white, with axes, grid and several coloured curves.
+    let shot = image::open(&shot).unwrap().to_rgb8();
+    let inked = shot
+        .pixels()
+        .filter(|p| p.0.iter().any(|&c| c < 200))
+        .count();
+    let colourful: BTreeSet<[u8; 3]> = shot
+        .pixels()
+        .filter(|p| {
+            let (lo, hi) = (p.0.iter().min().unwrap(), p.0.iter().max().unwrap());
+            hi - lo > 80
+        })
+        .map(|p| p.0.map(|c| c / 32))
+        .collect();
+    let share = inked as f64 / (shot.width() * shot.height()) as f64;
+    assert!(
+        share > 0.01 && share < 0.5,
+        "{share} of the screenshot inked"
+    );
+    assert!(colourful.len() >= 4, "{} colours", colourful.len());
+}
