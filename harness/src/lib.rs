@@ -3,6 +3,7 @@
 pub mod accuracy;
 pub mod bake;
 pub mod baselines;
+pub mod bench_table;
 pub mod chart;
 pub mod export;
 pub mod gltf;
