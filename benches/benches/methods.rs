@@ -2,30 +2,77 @@
 //! of the standard report on the same scenes under the same environment.
 //! Criterion groups by scene, so each group is a comparison table.
 //!
-//! Run with `cargo bench -p benches --bench methods`. Error against the
-//! reference is not measured here: `harness report` prints both.
+//! A method that cannot shade a scene (deferred shadowing on the skinned
+//! human) is left out of its group, with a line saying why.
+//!
+//! Before timing, each method runs once over every frame of the scene and is
+//! scored as `harness report` scores it: relative L2 error per vertex against
+//! the converged Monte-Carlo reference (cached in `.cache/reference` at the
+//! workspace root), mean over frames. The errors are written beside
+//! criterion's results, to `<criterion dir>/frame_<scene>/errors.json`, and
+//! `harness::bench_table` prints them beside the medians.
+//!
+//! Run with `cargo bench -p benches --bench methods`.
+
+use std::path::Path;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use harness::{methods, scenes};
+use harness::{
+    bench_table::{self, GroupErrors},
+    methods,
+    reference::{self, ReferenceCache, ReferenceSettings},
+    run::{self, References},
+    scenes,
+};
+use indicatif::ProgressBar;
+
+/// What `errors.json` holds.
+const MEASURE: &str = "relative L2 error per vertex against the converged Monte-Carlo \
+                       reference, mean over the scene's frames (as `harness report` scores it)";
 
 fn frame_per_method(c: &mut Criterion) {
     let gpu = methods::SharedGpu::new();
+    let cache =
+        ReferenceCache::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("../.cache/reference"));
+    let criterion_dir = bench_table::criterion_dir();
     for spec in scenes::SCENES
         .iter()
         .filter(|s| ["bunny", "human"].contains(&s.name))
     {
         let scene = scenes::builtin(spec.name).expect("built-in scene");
         let env = scenes::environment(spec.environment).expect("shipped environment");
+        let (references, _) = reference::scene_references(
+            &scene,
+            &env,
+            &ReferenceSettings::CONVERGED,
+            Some(&cache),
+            &ProgressBar::hidden(),
+        )
+        .expect("vertex references");
         let frame = scene
             .frame_geometry(scene.frames().len() / 2)
             .expect("a middle frame");
         let eye = scene.camera().eye;
-        let mut group = c.benchmark_group(format!("frame/{}", spec.name));
+        let group_id = format!("frame/{}", spec.name);
+        let mut errors = GroupErrors::new(&group_id, MEASURE);
+        let mut group = c.benchmark_group(&group_id);
         group.sample_size(10);
         for name in methods::REPORT_METHODS {
             let mut method = methods::by_name(name, &gpu).expect("registered method");
-            method.prepare(&scene).expect("prepare");
-            method.relight(&env).expect("relight");
+            if let Err(why) = method.capabilities().check(name, &scene) {
+                println!("{group_id}/{name}: not run ({why})");
+                continue;
+            }
+            // Prepares, relights and scores every frame once.
+            let scored = run::run(
+                method.as_mut(),
+                &scene,
+                &env,
+                References::vertices(&references),
+                1,
+            )
+            .expect("scored run");
+            errors.insert(*name, f64::from(scored.mean_error()));
             group.bench_function(BenchmarkId::from_parameter(name), |b| {
                 b.iter(|| {
                     method.update(&frame, scene.camera()).expect("update");
@@ -34,6 +81,7 @@ fn frame_per_method(c: &mut Criterion) {
             });
         }
         group.finish();
+        errors.write(&criterion_dir).expect("errors.json written");
     }
 }
 
