@@ -142,6 +142,19 @@ enum Command {
         #[command(flatten)]
         image: ImageArgs,
     },
+    /// Criterion's saved results (`cargo bench -p benches`) as one table:
+    /// each benchmark's median time per iteration with criterion's
+    /// confidence interval, and the method's error where the bench
+    /// recorded it.
+    BenchTable {
+        /// Criterion's output directory.
+        #[arg(long, default_value = "target/criterion")]
+        dir: PathBuf,
+        /// Write the table here instead of printing it: `.md` for
+        /// Markdown, `.csv` for CSV (one line per benchmark).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Score hemi-raster's options (hierarchy, plane table, mask, integration)
     /// by Kautz et al.'s transfer error and by radiance error; write
     /// accuracy.md, accuracy.json and accuracy.png (time against error).
@@ -295,6 +308,14 @@ impl Input {
             (None, None) => bail!("give --scene or --mesh"),
         };
         Ok((scene, self.env.load(default_env)?))
+    }
+}
+
+/// Prints a line above the progress bars, or to stderr when they are hidden
+/// (output not a terminal).
+fn say(multi: &MultiProgress, line: String) {
+    if multi.is_hidden() || multi.println(&line).is_err() {
+        eprintln!("{line}");
     }
 }
 
@@ -685,9 +706,18 @@ fn main() -> Result<()> {
                 runs: Vec::new(),
                 skipped: Vec::new(),
                 strip: None,
+                atlas_scenes: Vec::new(),
+                atlas: Vec::new(),
             };
             let settings_count: usize = families.iter().map(|f| f.methods.len()).sum();
-            let overall = multi.add(ProgressBar::new((names.len() * settings_count) as u64));
+            let atlas_names = if chosen.is_empty() {
+                suite.atlas_scenes()
+            } else {
+                Vec::new()
+            };
+            let atlas_settings = suite.atlas_settings();
+            let total = names.len() * settings_count + atlas_names.len() * atlas_settings.len();
+            let overall = multi.add(ProgressBar::new(total as u64));
             overall.set_style(
                 ProgressStyle::with_template(
                     "{msg:>40} [{elapsed_precise}] {wide_bar} {pos}/{len} runs",
@@ -717,13 +747,16 @@ fn main() -> Result<()> {
                         let mut m = methods::by_name(setting, &gpu)?;
                         match run::run(m.as_mut(), &scene, &env, references, repeats) {
                             Ok(result) => {
-                                multi.println(format!(
-                                    "{name:<10} {setting:<28} error {:.2}% per vertex, {} per pixel",
-                                    result.mean_error() * 100.0,
-                                    result
-                                        .mean_image_error()
-                                        .map_or("–".into(), |e| format!("{:.2}%", e * 100.0))
-                                ))?;
+                                say(
+                                    &multi,
+                                    format!(
+                                        "{name:<10} {setting:<28} error {:.2}% per vertex, {} per pixel",
+                                        result.mean_error() * 100.0,
+                                        result
+                                            .mean_image_error()
+                                            .map_or("–".into(), |e| format!("{:.2}%", e * 100.0))
+                                    ),
+                                );
                                 report.runs.push(report::ReportRun {
                                     family: family.name.to_string(),
                                     setting: setting.to_string(),
@@ -753,6 +786,51 @@ fn main() -> Result<()> {
                     report.strip = Some(scene.name().to_string());
                 }
             }
+            for name in atlas_names {
+                let stress = scenes::stress::stress_scene(name)?;
+                let (scene, env) = (&stress.scene, &stress.environment);
+                overall.set_message(format!("references of {name}"));
+                let (refs, mut info) = references(scene, env, &estimator, &multi)?;
+                let camera = image.camera(scene)?;
+                let settings = image.settings(&estimator);
+                let (image_refs, image_info) =
+                    image_references(scene, env, &camera, &settings, &estimator, &multi)?;
+                info.image = Some(image_info);
+                let atlas_scene = report::AtlasScene {
+                    name: name.to_string(),
+                    breaks: stress.breaks.to_string(),
+                    reference: info,
+                };
+                let references = References {
+                    vertex: &refs,
+                    image: Some((&camera, &image_refs)),
+                };
+                let first = report.atlas.len();
+                for (family, setting) in &atlas_settings {
+                    overall.set_message(format!("{name}: {setting}"));
+                    let mut m = methods::by_name(setting, &gpu)?;
+                    let outcome = match run::run(m.as_mut(), scene, env, references, repeats) {
+                        Ok(result) => report::Outcome::Ran(Box::new(result)),
+                        Err(e) => report::Outcome::Refused(e.to_string()),
+                    };
+                    let entry =
+                        report::AtlasRun::new(&atlas_scene, family, setting, outcome, &report.runs);
+                    say(&multi, format!("{name:<16} {}", entry.diagnosis));
+                    report.atlas.push(entry);
+                    overall.inc(1);
+                }
+                let runs: Vec<&run::RunResult> = report.atlas[first..]
+                    .iter()
+                    .filter_map(|a| match &a.outcome {
+                        report::Outcome::Ran(r) => Some(r.as_ref()),
+                        report::Outcome::Refused(_) => None,
+                    })
+                    .collect();
+                if let Some(reference) = image_refs.last() {
+                    images::write_scene(&dir.join("atlas"), name, &reference.image, &runs)?;
+                }
+                report.atlas_scenes.push(atlas_scene);
+            }
             overall.finish_and_clear();
             report.machine.adapter = gpu.adapter();
             report.write(&dir)?;
@@ -760,6 +838,21 @@ fn main() -> Result<()> {
                 "wrote index.html, report.md, report.json, report.csv and the charts in {}",
                 dir.display()
             );
+        }
+        Command::BenchTable { dir, out } => {
+            let table = harness::bench_table::collect(&dir)?;
+            match out {
+                None => print!("{}", table.markdown()),
+                Some(path) => {
+                    let text = match path.extension().and_then(|e| e.to_str()) {
+                        Some(ext) if ext.eq_ignore_ascii_case("md") => table.markdown(),
+                        Some(ext) if ext.eq_ignore_ascii_case("csv") => table.csv(),
+                        _ => bail!("--out {}: expected a .md or .csv file", path.display()),
+                    };
+                    harness::io::write_atomic(&path, text.as_bytes())?;
+                    println!("wrote {}", path.display());
+                }
+            }
         }
         Command::Accuracy {
             scenes: chosen,

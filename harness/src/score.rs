@@ -12,6 +12,10 @@ use crate::reference::{ImageReference, VertexReference};
 pub struct ErrorStats {
     /// `sqrt(Σ|x − r|² / Σ|r|²)` over the domain, on linear RGB.
     pub relative_l2: f32,
+    /// Median of the per-element relative error.
+    pub p50: f32,
+    /// 90th percentile of the per-element relative error.
+    pub p90: f32,
     /// 99th percentile of the per-element relative error.
     pub p99: f32,
     /// Largest per-element relative error.
@@ -178,6 +182,8 @@ pub fn compare(values: &[Vec3], reference: &[Vec3], std_error: Option<&[Vec3]>) 
     };
     ErrorStats {
         relative_l2: ratio(sum_d2),
+        p50: percentile(&relative, 0.5),
+        p90: percentile(&relative, 0.9),
         p99: percentile(&relative, 0.99),
         max: relative.last().copied().unwrap_or(0.0),
         reference_noise: ratio(noise),

@@ -45,6 +45,48 @@ impl Suite {
         }
     }
 
+    /// The stress scenes of the stability atlas
+    /// ([`crate::scenes::stress::STRESS_SCENES`]).
+    pub fn atlas_scenes(self) -> Vec<&'static str> {
+        let all = crate::scenes::stress::STRESS_SCENES.iter().map(|s| s.0);
+        match self {
+            Suite::Quick => all
+                .filter(|s| ["thin-sheets", "near-contact", "sun-only"].contains(s))
+                .collect(),
+            Suite::Default | Suite::Full => all.collect(),
+        }
+    }
+
+    /// One setting per family that the atlas runs on every stress scene,
+    /// with the family it belongs to.
+    pub fn atlas_settings(self) -> Vec<(&'static str, &'static str)> {
+        let quick = self == Suite::Quick;
+        vec![
+            ("unshadowed", "unshadowed"),
+            ("hemi-raster", "hemi-raster"),
+            (
+                "occlusion-query",
+                if quick {
+                    "occlusion-query:k=66"
+                } else {
+                    "occlusion-query"
+                },
+            ),
+            (
+                "deferred-shadow",
+                if quick {
+                    "deferred-shadow:q=8"
+                } else {
+                    "deferred-shadow"
+                },
+            ),
+            (
+                RAY_TRACER,
+                if quick { "raytrace:16" } else { "raytrace:64" },
+            ),
+        ]
+    }
+
     /// The families and their sweeps.
     pub fn families(self) -> Vec<Family> {
         let quick = self == Suite::Quick;

@@ -77,6 +77,7 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
     assert_eq!(runs.len() + skipped.len(), seen.len());
 
     // Every error is finite and the table's figure is the JSON's frames'.
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     let csv = std::fs::read_to_string(out.join("report.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -114,6 +115,40 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
         }
     }
 
+    // The atlas: every stress scene of the suite with every atlas setting,
+    // a sentence each; a refusal names the capability.
+    let atlas = json["atlas"].as_array().unwrap();
+    for scene in Suite::Quick.atlas_scenes() {
+        for (_, setting) in Suite::Quick.atlas_settings() {
+            let entry = atlas
+                .iter()
+                .find(|a| a["scene"] == scene && a["setting"] == setting)
+                .unwrap_or_else(|| panic!("{setting} on {scene}: not in the atlas"));
+            let diagnosis = entry["diagnosis"].as_str().unwrap();
+            assert!(
+                diagnosis.starts_with(setting) && diagnosis.ends_with('.'),
+                "{diagnosis}"
+            );
+            if let Some(why) = entry["outcome"].get("Refused") {
+                assert!(why.as_str().unwrap().contains("support"), "{why}");
+            } else {
+                let frames = entry["outcome"]["Ran"]["frames"].as_array().unwrap();
+                for f in frames {
+                    for p in ["p50", "p90", "p99", "max"] {
+                        assert!(
+                            f["vertex"][p].as_f64().unwrap().is_finite(),
+                            "{setting} on {scene}"
+                        );
+                    }
+                }
+                assert!(
+                    md.contains(&format!("atlas/{scene}/")),
+                    "{scene}: no error map"
+                );
+            }
+        }
+    }
+
     // The figures decode, and the page embeds them all.
     let mut charts = 0;
     for entry in std::fs::read_dir(out.join("charts")).unwrap() {
@@ -127,7 +162,6 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
     assert!(charts >= 2 * Suite::Quick.scenes().len());
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     assert!(!html.contains("[missing"));
-    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     for scene in Suite::Quick.scenes() {
         assert!(md.contains(&format!("## Scene: {scene}")), "{scene}");
     }

@@ -10,6 +10,7 @@
 //! finished, `index.html` last: an interrupted run leaves the previous
 //! report as it was.
 
+mod atlas;
 mod document;
 #[cfg(test)]
 mod tests;
@@ -26,6 +27,7 @@ use crate::{
     score::ErrorStats,
     suite::{Family, RAY_TRACER, Suite},
 };
+pub use atlas::{AtlasRun, AtlasScene, Outcome};
 pub use document::{Block, Document, Figure, Table};
 
 /// Where and how the numbers were measured.
@@ -216,6 +218,9 @@ pub struct Report {
     /// ([`STRIP_SCENE`]), when its images were written (under
     /// `strip/{scene}/`).
     pub strip: Option<String>,
+    /// The stability atlas's scenes and runs (images under `atlas/{scene}/`).
+    pub atlas_scenes: Vec<AtlasScene>,
+    pub atlas: Vec<AtlasRun>,
 }
 
 /// The scene of the image strip: the bunny's contact shadow on a
@@ -552,6 +557,7 @@ impl Report {
         if let Some(scene) = &self.strip {
             self.strip_blocks(&mut doc, scene);
         }
+        atlas::blocks(&mut doc, &self.atlas_scenes, &self.atlas);
         if !self.skipped.is_empty() {
             doc.push(Block::Heading(2, "Not run".into()));
             doc.push(Block::Bullets(

@@ -6,6 +6,8 @@ use shadow_core::{Capabilities, Profile};
 fn stats(error: f32) -> ErrorStats {
     ErrorStats {
         relative_l2: error,
+        p50: 0.8 * error,
+        p90: 1.5 * error,
         p99: 2.0 * error,
         max: 3.0 * error,
         reference_noise: 0.005,
@@ -97,6 +99,8 @@ fn report() -> Report {
             why: "does not support deforming meshes".into(),
         }],
         strip: None,
+        atlas_scenes: Vec::new(),
+        atlas: Vec::new(),
     }
 }
 

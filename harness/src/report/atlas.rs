@@ -1,0 +1,196 @@
+//! The stability atlas: every family's standard setting on the stress
+//! scenes ([`crate::scenes::stress`]), each built to break something, with
+//! the error percentiles, where on the surface the method fails (the error
+//! heat map of its image) and one sentence on why, from what the run
+//! measured.
+
+use serde::Serialize;
+
+use super::{Block, Document, Figure, ReferenceInfo, ReportRun, Table};
+use crate::run::RunResult;
+
+/// A stress scene of the atlas and its reference.
+#[derive(Clone, Debug, Serialize)]
+pub struct AtlasScene {
+    pub name: String,
+    /// What the scene is built to break.
+    pub breaks: String,
+    pub reference: ReferenceInfo,
+}
+
+/// What a method did on a stress scene.
+#[derive(Clone, Debug, Serialize)]
+pub enum Outcome {
+    Ran(Box<RunResult>),
+    /// The method refused the scene; the message names the capability or
+    /// input at fault.
+    Refused(String),
+}
+
+/// One method on one stress scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct AtlasRun {
+    pub scene: String,
+    pub family: String,
+    pub setting: String,
+    pub outcome: Outcome,
+    /// One sentence on how it fared and why, from the measurements.
+    pub diagnosis: String,
+}
+
+impl AtlasRun {
+    /// Scores `outcome` against the scene's reference and the same
+    /// setting's runs on the standard scenes.
+    pub fn new(
+        scene: &AtlasScene,
+        family: &str,
+        setting: &str,
+        outcome: Outcome,
+        standard: &[ReportRun],
+    ) -> AtlasRun {
+        let diagnosis = diagnose(setting, &outcome, standard);
+        AtlasRun {
+            scene: scene.name.clone(),
+            family: family.to_string(),
+            setting: setting.to_string(),
+            outcome,
+            diagnosis,
+        }
+    }
+}
+
+/// The sentence: how the mean error compares with the setting's median on
+/// the standard scenes, whether the error is everywhere or concentrated in
+/// a few vertices, and whether it jumps between frames.
+fn diagnose(setting: &str, outcome: &Outcome, standard: &[ReportRun]) -> String {
+    let run = match outcome {
+        Outcome::Refused(why) => return format!("{setting} refuses the scene: {why}."),
+        Outcome::Ran(run) => run,
+    };
+    let mean = run.mean_error();
+    let worst = |f: fn(&crate::score::ErrorStats) -> f32| {
+        run.frames
+            .iter()
+            .map(|f2| f(&f2.vertex))
+            .fold(0.0, f32::max)
+    };
+    let (p50, p99) = (worst(|e| e.p50), worst(|e| e.p99));
+    let noise = run
+        .frames
+        .iter()
+        .map(|f| f.vertex.reference_noise)
+        .fold(0.0, f32::max);
+    if !mean.is_finite() || !p99.is_finite() {
+        return format!("{setting} returns non-finite radiance on this scene.");
+    }
+    let mut typical: Vec<f32> = standard
+        .iter()
+        .filter(|r| r.setting == setting)
+        .map(|r| r.result.mean_error())
+        .collect();
+    typical.sort_by(f32::total_cmp);
+    let compared = match typical.get(typical.len() / 2) {
+        Some(&t) if t > 0.0 => format!(
+            "{:.1}% error, {:.1}× its median on the standard scenes ({:.1}%)",
+            mean * 100.0,
+            mean / t,
+            t * 100.0
+        ),
+        _ => format!("{:.1}% error", mean * 100.0),
+    };
+    let spread = if p50 <= (2.0 * noise).max(0.02) && p99 > 10.0 * p50.max(noise) && p99 > 0.05 {
+        format!(
+            "most vertices are right (median {:.1}%) but the worst 1% reach {:.0}%: a local failure, \
+             which the error map places",
+            p50 * 100.0,
+            p99 * 100.0
+        )
+    } else if mean < 2.0 * noise.max(0.005) {
+        "indistinguishable from the reference's noise".to_string()
+    } else {
+        format!(
+            "the error is spread over the surface (median {:.1}%, worst 1% {:.0}%)",
+            p50 * 100.0,
+            p99 * 100.0
+        )
+    };
+    let flicker = run.worst_temporal().filter(|t| {
+        t.error_change > 3.0 * t.noise_floor && t.error_change > 0.5 * t.reference_change
+    });
+    let flicker = flicker.map_or(String::new(), |t| {
+        format!(
+            "; its error jumps between frames by {:.1}% where the reference itself moves {:.1}%",
+            t.error_change * 100.0,
+            t.reference_change * 100.0
+        )
+    });
+    format!("{setting}: {compared}; {spread}{flicker}.")
+}
+
+/// The atlas's section of the report.
+pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun]) {
+    if scenes.is_empty() {
+        return;
+    }
+    doc.push(Block::Heading(2, "Stability atlas".into()));
+    doc.push(Block::Paragraph(
+        "Each family's standard setting on scenes built to break something. Per-vertex relative \
+         error percentiles (worst frame), flicker, and a sentence from the measurements; the maps \
+         show per pixel where each method fails (0.1% to 100%, logarithmic)."
+            .into(),
+    ));
+    for scene in scenes {
+        doc.push(Block::Heading(3, format!("Stress: {}", scene.name)));
+        doc.push(Block::Paragraph(format!(
+            "Built to break {} (reference noise {:.2}% per vertex).",
+            scene.breaks,
+            scene.reference.noise * 100.0
+        )));
+        let mut table = Table::new(&[
+            "setting", "error#", "p50#", "p90#", "p99#", "max#", "flicker#", "why",
+        ]);
+        let mut maps = vec![Figure {
+            path: format!("atlas/{}/reference.png", scene.name),
+            caption: "reference".into(),
+        }];
+        for run in runs.iter().filter(|r| r.scene == scene.name) {
+            let percent = |v: f32| format!("{:.1}%", v * 100.0);
+            match &run.outcome {
+                Outcome::Refused(_) => table.row(vec![
+                    run.setting.clone(),
+                    "refused".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    run.diagnosis.clone(),
+                ]),
+                Outcome::Ran(r) => {
+                    let worst = |f: fn(&crate::score::ErrorStats) -> f32| {
+                        r.frames.iter().map(|fr| f(&fr.vertex)).fold(0.0, f32::max)
+                    };
+                    table.row(vec![
+                        run.setting.clone(),
+                        percent(r.mean_error()),
+                        percent(worst(|e| e.p50)),
+                        percent(worst(|e| e.p90)),
+                        percent(worst(|e| e.p99)),
+                        percent(worst(|e| e.max)),
+                        r.worst_temporal()
+                            .map_or("–".into(), |t| percent(t.error_change)),
+                        run.diagnosis.clone(),
+                    ]);
+                    if r.last_image.is_some() || r.image_size.is_some() {
+                        maps.push(Figure {
+                            path: format!("atlas/{}/{}-error.png", scene.name, r.method),
+                            caption: format!("{} error", run.setting),
+                        });
+                    }
+                }
+            }
+        }
+        doc.push(Block::Table(table));
+        doc.push(Block::Figures(maps));
+    }
+}
