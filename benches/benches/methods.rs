@@ -1,5 +1,5 @@
-//! The methods side by side: one frame (update, then shade) of every method
-//! of the standard report on the same scenes under the same environment.
+//! The methods side by side: one frame (update, then shade) of every setting
+//! of the default report suite on the same scenes under the same environment.
 //! Criterion groups by scene, so each group is a comparison table.
 //!
 //! A method that cannot shade a scene (deferred shadowing on the skinned
@@ -23,6 +23,7 @@ use harness::{
     reference::{self, ReferenceCache, ReferenceSettings},
     run::{self, References},
     scenes,
+    suite::Suite,
 };
 use indicatif::ProgressBar;
 
@@ -57,7 +58,8 @@ fn frame_per_method(c: &mut Criterion) {
         let mut errors = GroupErrors::new(&group_id, MEASURE);
         let mut group = c.benchmark_group(&group_id);
         group.sample_size(10);
-        for name in methods::REPORT_METHODS {
+        let settings = Suite::Default.families().into_iter().flat_map(|f| f.methods);
+        for name in settings {
             let mut method = methods::by_name(name, &gpu).expect("registered method");
             if let Err(why) = method.capabilities().check(name, &scene) {
                 println!("{group_id}/{name}: not run ({why})");
@@ -72,7 +74,7 @@ fn frame_per_method(c: &mut Criterion) {
                 1,
             )
             .expect("scored run");
-            errors.insert(*name, f64::from(scored.mean_error()));
+            errors.insert(name, f64::from(scored.mean_error()));
             group.bench_function(BenchmarkId::from_parameter(name), |b| {
                 b.iter(|| {
                     method.update(&frame, scene.camera()).expect("update");
