@@ -3,7 +3,6 @@
 use std::f32::consts::{FRAC_1_PI, TAU};
 
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::{Error, Result};
 
@@ -12,7 +11,8 @@ use crate::{Error, Result};
 /// Built through [`Brdf::lambert`] and [`Brdf::phong`], which reject albedos
 /// that would create energy (a channel outside [0, 1], or diffuse + specular
 /// above 1) so that every material in the program is physically plausible.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub enum Brdf {
     /// f_r = ρ/π.
     Lambert { albedo: Vec3 },

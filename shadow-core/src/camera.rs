@@ -1,12 +1,12 @@
 //! A pinhole camera: where the viewer is, and the pixels of an image.
 
 use glam::{Mat4, Vec3};
-use serde::Serialize;
 
 use crate::{Error, Result};
 
 /// A perspective pinhole camera looking from `eye` at `target`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Camera {
     pub eye: Vec3,
     pub target: Vec3,

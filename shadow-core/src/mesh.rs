@@ -3,12 +3,12 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::{Error, Result};
 
 /// An axis-aligned bounding box.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Aabb {
     pub min: Vec3,
     pub max: Vec3,
@@ -69,7 +69,8 @@ impl Aabb {
 }
 
 /// What validation changed while building a [`Mesh`], for reports and logs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct MeshReport {
     /// Triangles dropped because they repeat a vertex or have zero area.
     pub degenerate_triangles: usize,

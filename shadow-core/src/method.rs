@@ -4,12 +4,12 @@
 use std::fmt;
 
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::{Camera, Environment, Error, Export, FrameGeometry, Profile, Result, Scene};
 
 /// Something a method may or may not support.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 #[non_exhaustive]
 pub enum Capability {
     /// Meshes that change shape between frames (skinning, morphs, cloth).
@@ -41,7 +41,8 @@ impl fmt::Display for Capability {
 }
 
 /// The set of capabilities a method has.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Capabilities {
     pub deforming_meshes: bool,
     pub rigid_motion: bool,
@@ -111,7 +112,8 @@ impl Capabilities {
 /// error of each value when the method is a Monte-Carlo estimate, and which
 /// vertices the method evaluated when it skips some (vertices it has not seen
 /// yet, say).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct VertexRadiance {
     /// `radiance[object][vertex]`; zero where not evaluated.
     pub radiance: Vec<Vec<Vec3>>,

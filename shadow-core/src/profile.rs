@@ -4,11 +4,10 @@
 
 use std::fmt;
 
-use serde::Serialize;
-
 /// The stages of [`ShadowMethod`](crate::ShadowMethod), in the order they run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 #[non_exhaustive]
 pub enum Stage {
     Prepare,
@@ -31,7 +30,8 @@ impl fmt::Display for Stage {
 }
 
 /// A named measurement within one stage.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct ProfileEntry {
     pub stage: Stage,
     /// What the entry measures, e.g. "rasterization" or "depth maps".
@@ -40,8 +40,9 @@ pub struct ProfileEntry {
 }
 
 /// Seconds of wall clock, or a count.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 pub enum ProfileValue {
     Seconds(f64),
     Count(u64),
@@ -60,7 +61,8 @@ impl fmt::Display for ProfileValue {
 /// The breakdown of the most recent call of each stage. A stage that measures
 /// itself starts with [`Profile::begin`] (dropping what its previous call
 /// recorded) and adds entries with [`Profile::seconds`] and [`Profile::count`].
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Profile {
     entries: Vec<ProfileEntry>,
 }

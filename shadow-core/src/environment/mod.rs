@@ -5,6 +5,7 @@
 //! up), and φ = 2π(j+½)/W, with direction ω = (sin θ cos φ, cos θ, sin θ sin φ).
 //! Row 0 is the top row (as OpenEXR stores it).
 
+#[cfg(feature = "exr")]
 mod exr;
 mod filter;
 mod sampling;
@@ -12,14 +13,14 @@ mod sampling;
 use std::f32::consts::{PI, TAU};
 
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::{Error, Result};
 
 pub use sampling::{EnvSample, EnvironmentSampler};
 
 /// What loading or building an environment changed, for reports.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct EnvironmentReport {
     /// Texel channels that were negative (ringing from HDR filtering or lossy
     /// compression) and were clamped to zero.

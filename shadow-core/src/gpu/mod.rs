@@ -34,7 +34,6 @@ pub mod uniforms;
 use std::fmt;
 use std::sync::{Arc, Mutex};
 
-use serde::Serialize;
 use wgpu::util::DeviceExt;
 
 use crate::{Error, Result};
@@ -43,7 +42,8 @@ pub use stages::GpuStages;
 
 /// What the harness reports about the adapter a run used (DESIGN.md, "Time":
 /// a software adapter such as lavapipe is named as such).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct AdapterSummary {
     /// The adapter's name, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)".
     pub name: String,

@@ -62,8 +62,6 @@ mod zonal;
 
 use std::fmt;
 
-use serde::Serialize;
-
 pub use basis::{eval_basis, eval_basis_lanes};
 pub use projection::{project_environment, project_fn, project_fn_rgb};
 pub use rgb::ShRgb;
@@ -72,7 +70,8 @@ pub use zonal::Zonal;
 
 /// A validated SH order: the number of bands n, 1 ≤ n ≤ [`ShOrder::MAX`],
 /// covering bands l = 0..n−1 and n² coefficients.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct ShOrder(u32);
 
 impl ShOrder {

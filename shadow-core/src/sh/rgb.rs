@@ -1,7 +1,6 @@
 //! An RGB coefficient vector: projected lighting, or any coloured function.
 
 use glam::Vec3;
-use serde::Serialize;
 
 use super::basis::eval_sum;
 use super::{ShOrder, ShRotation, Zonal};
@@ -13,7 +12,8 @@ use super::{ShOrder, ShRotation, Zonal};
 /// [`project_environment`](super::project_environment),
 /// [`project_fn_rgb`](super::project_fn_rgb), [`ShRgb::zeros`] or
 /// [`ShRgb::from_coeffs`].
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct ShRgb {
     order: ShOrder,
     coeffs: Vec<Vec3>,
