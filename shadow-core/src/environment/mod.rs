@@ -3,14 +3,20 @@
 //! The mapping is fixed once, here (DESIGN.md, "Conventions"): texel (row i,
 //! column j) of a W×H map is centred on θ = π(i+½)/H, θ = 0 being +Y (straight
 //! up), and φ = 2π(j+½)/W, with direction ω = (sin θ cos φ, cos θ, sin θ sin φ).
-//! Row 0 is the top row (as OpenEXR stores it).
+//! Row 0 is the top row (as OpenEXR and Radiance RGBE store it).
+//!
+//! Maps are read from OpenEXR files (feature `exr`) and Radiance RGBE files
+//! (feature `hdr`); [`Environment::load`] picks the reader by extension.
 
 #[cfg(feature = "exr")]
 mod exr;
 mod filter;
+#[cfg(feature = "hdr")]
+mod hdr;
 mod sampling;
 
 use std::f32::consts::{PI, TAU};
+use std::path::Path;
 
 use glam::Vec3;
 
@@ -105,6 +111,80 @@ impl Environment {
             vec![radiance; 16 * 8],
         )
         .expect("a finite uniform radiance")
+    }
+
+    /// Loads a map file, the format chosen by its extension, in any case:
+    /// `.exr` is OpenEXR (`load_exr`, feature `exr`) and `.hdr` is Radiance
+    /// RGBE (`load_hdr`, feature `hdr`).
+    ///
+    /// Any other extension, or none, is an [`Error::Format`] naming the file
+    /// and the formats `load` reads; so is a format whose feature is off in
+    /// this build, naming the feature. Otherwise the errors are the reader's.
+    pub fn load(path: &Path) -> Result<Environment> {
+        let extension = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        match extension.as_str() {
+            #[cfg(feature = "exr")]
+            "exr" => return Environment::load_exr(path),
+            #[cfg(feature = "hdr")]
+            "hdr" => return Environment::load_hdr(path),
+            _ => {}
+        }
+        let what = match MAP_FORMATS.iter().find(|f| f.extension == extension) {
+            Some(format) => format!(
+                "{} maps need shadow-core's feature `{}`, which is off in this build",
+                format.name, format.feature
+            ),
+            None => {
+                let formats: Vec<String> = MAP_FORMATS
+                    .iter()
+                    .map(|f| format!(".{} ({})", f.extension, f.name))
+                    .collect();
+                let subject = if extension.is_empty() {
+                    "no extension".to_string()
+                } else {
+                    format!("extension .{extension}")
+                };
+                format!(
+                    "unknown environment map format ({subject}); the formats are {}",
+                    formats.join(" and ")
+                )
+            }
+        };
+        Err(Error::format(path, what))
+    }
+
+    /// The map with every texel multiplied by `factor`: an exposure change,
+    /// e.g. to bring a map stored in arbitrary units to the radiance a scene
+    /// is lit with. The name and the [`EnvironmentReport`] stay.
+    ///
+    /// `factor` must be finite and positive (zero would turn the light off, a
+    /// negative factor would make radiance negative), and no texel may
+    /// overflow to infinity: otherwise [`Error::InvalidEnvironment`].
+    pub fn scaled(mut self, factor: f32) -> Result<Environment> {
+        let bad = |name: String, what: String| Error::InvalidEnvironment {
+            source_name: name,
+            what,
+        };
+        if !(factor.is_finite() && factor > 0.0) {
+            return Err(bad(
+                self.name,
+                format!("exposure factor {factor} is not finite and positive"),
+            ));
+        }
+        for t in &mut self.texels {
+            *t *= factor;
+        }
+        let overflowed = self.texels.iter().filter(|t| !t.is_finite()).count();
+        if overflowed > 0 {
+            return Err(bad(
+                self.name,
+                format!("exposure factor {factor} overflows {overflowed} texels to infinity"),
+            ));
+        }
+        Ok(self)
     }
 
     pub fn name(&self) -> &str {
@@ -207,6 +287,28 @@ impl Environment {
     }
 }
 
+/// A map file format [`Environment::load`] knows.
+struct MapFormat {
+    /// Lower case, without the dot.
+    extension: &'static str,
+    name: &'static str,
+    /// The shadow-core feature that reads it.
+    feature: &'static str,
+}
+
+const MAP_FORMATS: [MapFormat; 2] = [
+    MapFormat {
+        extension: "exr",
+        name: "OpenEXR",
+        feature: "exr",
+    },
+    MapFormat {
+        extension: "hdr",
+        name: "Radiance RGBE",
+        feature: "hdr",
+    },
+];
+
 /// ω = (sin θ cos φ, cos θ, sin θ sin φ).
 pub fn direction_from_angles(theta: f32, phi: f32) -> Vec3 {
     let (st, ct) = theta.sin_cos();
@@ -303,6 +405,91 @@ mod tests {
             msg.contains("bad.exr") && msg.contains("2 texels") && msg.contains("row 1, column 1"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn scaled_multiplies_every_texel_and_keeps_name_and_report() {
+        let mut texels = vec![Vec3::new(1.0, 2.0, 0.5); 8 * 4];
+        texels[3] = Vec3::new(-1.0, 1.0, 1.0);
+        let env = Environment::new("sky", 8, 4, texels).unwrap();
+        let report = env.report();
+        let brighter = env.clone().scaled(2.5).unwrap();
+        assert_eq!(brighter.name(), "sky");
+        assert_eq!(brighter.report(), report);
+        for (b, t) in brighter.texels().iter().zip(env.texels()) {
+            assert_relative_eq!(*b, *t * 2.5);
+        }
+        assert_relative_eq!(
+            brighter.integral(),
+            env.integral() * 2.5,
+            max_relative = 1e-6
+        );
+    }
+
+    #[test]
+    fn scaled_refuses_factors_that_are_not_finite_and_positive() {
+        for factor in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            let err = Environment::uniform(Vec3::ONE)
+                .renamed("sky")
+                .scaled(factor)
+                .unwrap_err();
+            let msg = err.to_string();
+            assert!(matches!(err, Error::InvalidEnvironment { .. }), "{msg}");
+            assert!(
+                msg.contains("sky") && msg.contains(&format!("factor {factor}")),
+                "{msg}"
+            );
+        }
+        let err = Environment::uniform(Vec3::splat(1e30))
+            .scaled(1e10)
+            .unwrap_err();
+        assert!(err.to_string().contains("overflows 128 texels"), "{err}");
+    }
+
+    #[test]
+    fn load_refuses_other_extensions_naming_file_and_formats() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["sky.png", "sky"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, "not read").unwrap();
+            let err = Environment::load(&path).unwrap_err();
+            let msg = err.to_string();
+            assert!(matches!(err, Error::Format { .. }), "{msg}");
+            assert!(
+                msg.contains(&path.display().to_string())
+                    && msg.contains(".exr (OpenEXR)")
+                    && msg.contains(".hdr (Radiance RGBE)"),
+                "{msg}"
+            );
+        }
+    }
+
+    #[cfg(not(feature = "exr"))]
+    #[test]
+    fn load_names_the_feature_a_format_needs() {
+        let path = Path::new("maps/Sky.EXR");
+        let msg = Environment::load(path).unwrap_err().to_string();
+        assert!(
+            msg.contains("maps/Sky.EXR") && msg.contains("feature `exr`"),
+            "{msg}"
+        );
+    }
+
+    #[cfg(all(feature = "exr", feature = "hdr"))]
+    #[test]
+    fn load_dispatches_by_extension_in_any_case() {
+        let dir = tempfile::tempdir().unwrap();
+        let env = gradient(8, 4);
+        let exr = dir.path().join("Map.EXR");
+        env.write_exr(&exr).unwrap();
+        let loaded = Environment::load(&exr).unwrap();
+        assert_eq!(loaded.texels(), env.texels());
+
+        // An OpenEXR file under an .hdr name goes to the Radiance reader.
+        let hdr = dir.path().join("map.Hdr");
+        std::fs::copy(&exr, &hdr).unwrap();
+        let msg = Environment::load(&hdr).unwrap_err().to_string();
+        assert!(msg.contains("map.Hdr") && msg.contains("Radiance"), "{msg}");
     }
 
     #[test]
