@@ -58,7 +58,10 @@ fn frame_per_method(c: &mut Criterion) {
         let mut errors = GroupErrors::new(&group_id, MEASURE);
         let mut group = c.benchmark_group(&group_id);
         group.sample_size(10);
-        let settings = Suite::Default.families().into_iter().flat_map(|f| f.methods);
+        let settings = Suite::Default
+            .families()
+            .into_iter()
+            .flat_map(|f| f.methods);
         for name in settings {
             let mut method = methods::by_name(name, &gpu).expect("registered method");
             if let Err(why) = method.capabilities().check(name, &scene) {

@@ -135,8 +135,7 @@ pub fn adjusted(env: Environment, degrees: f32, ev: f32) -> Result<Environment> 
     }
     if ev != 0.0 {
         name = format!("{name}, {ev:+} EV");
-        let texels = env.texels().iter().map(|t| *t * ev.exp2()).collect();
-        env = Environment::new(env.name(), env.width(), env.height(), texels)?;
+        env = env.scaled(ev.exp2())?;
     }
     Ok(env.renamed(name))
 }
@@ -193,7 +192,7 @@ pub fn environment(name_or_path: &str) -> Result<Environment> {
         || name_or_path.to_string(),
         |s| s.to_string_lossy().into_owned(),
     );
-    Ok(Environment::load_exr(&path)?.renamed(short))
+    Ok(Environment::load(&path)?.renamed(short))
 }
 
 /// The floor and wall of the analytic scene: a 4×4 m floor at y = 0 and a
