@@ -420,7 +420,7 @@ fn main() -> Result<()> {
                 println!("  {:<10} ({}) {}", s.name, s.environment, s.shows);
             }
             println!(
-                "environments: {} (or a path to an .exr)",
+                "environments: {} (or a path to an .exr or .hdr lat-long map)",
                 ENVIRONMENTS.join(", ")
             );
             println!("methods:");
