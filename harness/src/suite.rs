@@ -118,11 +118,19 @@ impl Suite {
             },
             Family {
                 name: "occlusion-query",
-                parameter: "lightsphere directions k",
+                parameter: "lightsphere directions k, depth map side",
                 methods: pick(
                     &["occlusion-query:k=18", "occlusion-query:k=66"],
-                    &["occlusion-query", "occlusion-query:simplified"],
-                    &["occlusion-query:k=1026", "occlusion-query:queries"],
+                    &[
+                        "occlusion-query",
+                        "occlusion-query:map=256",
+                        "occlusion-query:simplified",
+                    ],
+                    &[
+                        "occlusion-query:k=1026",
+                        "occlusion-query:map=1024",
+                        "occlusion-query:queries",
+                    ],
                 ),
             },
             Family {
