@@ -11,6 +11,7 @@ mod camera;
 pub mod environment;
 mod error;
 mod export;
+pub mod frame;
 mod mesh;
 mod method;
 mod profile;
@@ -18,7 +19,9 @@ pub mod qmc;
 pub mod raster;
 mod scene;
 pub mod sh;
+pub mod shading;
 pub mod shapes;
+pub mod triangle;
 
 #[cfg(feature = "bvh")]
 pub mod bvh;
@@ -30,6 +33,7 @@ pub use camera::Camera;
 pub use environment::{Environment, EnvironmentReport};
 pub use error::{Error, Result};
 pub use export::{DirectionalVisibility, Export, ShTransfer, TransferSpace};
+pub use frame::{TangentSpace, ray_origin};
 pub use mesh::{Aabb, Adjacency, Mesh, MeshReport};
 pub use method::{Capabilities, Capability, Image, ShadowMethod, VertexRadiance};
 pub use profile::{Profile, ProfileEntry, ProfileValue, Stage};
