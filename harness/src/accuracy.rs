@@ -14,7 +14,7 @@
 //! order, whose radiance error is the floor that SH truncation sets under
 //! that environment: no order-5 transfer method can do better.
 
-use std::{f32::consts::FRAC_1_PI, fmt::Write, num::NonZeroU32, path::Path};
+use std::{fmt::Write, num::NonZeroU32, path::Path};
 
 use glam::Vec3;
 use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution, Pvs};
@@ -23,6 +23,7 @@ use serde::Serialize;
 use shadow_core::{
     Environment, Error, Export, Result, Scene,
     sh::{self, ShOrder, ShRgb, Zonal},
+    shading::lambert_transfer_radiance,
 };
 
 use crate::{
@@ -618,7 +619,7 @@ impl Bounds {
         transfer
             .chunks_exact(n)
             .zip(&self.albedo)
-            .map(|(t, rho)| (*rho * FRAC_1_PI * self.light.dot(t)).max(Vec3::ZERO))
+            .map(|(t, &rho)| lambert_transfer_radiance(rho, &self.light, t).max(Vec3::ZERO))
             .collect()
     }
 
