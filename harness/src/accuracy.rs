@@ -17,7 +17,7 @@
 use std::{fmt::Write, num::NonZeroU32, path::Path};
 
 use glam::Vec3;
-use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution, Pvs};
+use hemi_raster::{Config, HemiRaster, Integration, MaskResolution, Pvs};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shadow_core::{
@@ -73,11 +73,8 @@ pub fn variants() -> Vec<Variant> {
         ),
         with(
             "flat",
-            "no hierarchy: every triangle at full resolution",
-            Config {
-                hierarchy: Hierarchy::Flat,
-                ..paper
-            },
+            "no hierarchy: every triangle at full resolution (Config::accurate)",
+            Config::accurate(),
         ),
         with(
             "rings-only",
@@ -97,11 +94,8 @@ pub fn variants() -> Vec<Variant> {
         ),
         with(
             "pvs",
-            "two-level with potentially visible sets built from the scored frames (§3.2): the same masks, so the same error",
-            Config {
-                pvs: Pvs::EVERY_FRAME,
-                ..paper
-            },
+            "two-level with potentially visible sets built from the scored frames (§3.2, Config::fast): the same masks, so the same error",
+            Config::fast(),
         ),
         with(
             "pvs-half",
@@ -155,11 +149,8 @@ pub fn variants() -> Vec<Variant> {
         ),
         with(
             "sh-blocks",
-            "SH from the paper's 4×4-block downsample instead of every blocked pixel",
-            Config {
-                integration: Integration::ShBlocks,
-                ..paper
-            },
+            "SH from the paper's 4×4-block downsample instead of every blocked pixel (Config::paper)",
+            Config::paper(),
         ),
         with(
             "direct",

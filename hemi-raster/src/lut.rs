@@ -7,14 +7,11 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
-use shadow_core::{Error, Result};
+use shadow_core::Result;
 
+use crate::config::check_plane_table;
 use crate::disk::DiskGrid;
 use crate::mask::{Mask, MaskRow};
-
-/// The largest table accepted (bytes); bigger ones are configuration
-/// mistakes rather than useful accuracy.
-const MAX_BYTES: usize = 1 << 30;
 
 /// Plane masks indexed by a cube-map parameterization of the plane normal
 /// m (§3.1.1): the face is the axis a of m's largest component, and the cell
@@ -59,21 +56,7 @@ impl<W: MaskRow> PlaneLut<W> {
     /// number), in parallel. Fails if `resolution` is zero or odd, or the
     /// table would exceed 1 GiB.
     pub fn new(grid: &DiskGrid<W>, resolution: usize) -> Result<PlaneLut<W>> {
-        let cells = 3usize
-            .checked_mul(resolution)
-            .and_then(|n| n.checked_mul(resolution))
-            .map(|n| n / 2);
-        let bytes = cells.and_then(|n| n.checked_mul(std::mem::size_of::<Mask<W>>()));
-        if resolution < 2 || resolution % 2 == 1 || bytes.is_none_or(|b| b > MAX_BYTES) {
-            return Err(Error::config(
-                "hemi-raster",
-                format!(
-                    "plane LUT resolution {resolution} per cube face must be even, at least 2, \
-                     and give a table of at most 1 GiB for {0}×{0} masks",
-                    W::RESOLUTION
-                ),
-            ));
-        }
+        check_plane_table(W::RESOLUTION, resolution)?;
         let start = Instant::now();
         let pixels: Vec<(usize, usize, Vec3)> = grid
             .disk()
