@@ -1,12 +1,12 @@
-//! What a user can tune, with the paper's choices as defaults.
+//! What a user can tune: plain settings, with named presets.
+//!
+//! Nothing here depends on the rest of the crate; the modules that use a
+//! setting say what it does.
 
 use std::num::NonZeroU32;
 
 use shadow_core::sh::ShOrder;
 use shadow_core::{Error, Result};
-
-use crate::kernel::Simd;
-use crate::transfer::Integration;
 
 /// Pixels per side of the visibility mask (one machine word per row).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -30,8 +30,20 @@ impl MaskResolution {
     }
 }
 
+/// How a mask becomes shading (§3, eq. 3; the `transfer` module).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integration {
+    /// SH transfer from every blocked pixel.
+    #[default]
+    ShPixels,
+    /// SH transfer from the 4×4-block grey downsample (§3.2).
+    ShBlocks,
+    /// No SH: the environment integrated over the visible pixels directly.
+    Direct,
+}
+
 /// Which blocker triangles are dropped when they face away from the receiver
-/// (see the [`rasterize`](crate::Rasterizer) docs for why this is exact for
+/// (see the [`Rasterizer`](crate::Rasterizer) docs for why this is exact for
 /// closed meshes only).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BackfaceCulling {
@@ -115,14 +127,10 @@ impl Hierarchy {
 impl Default for Hierarchy {
     /// One tenth of every object's triangles, at least 300, with the
     /// two-ring, plus the fine triangles within twice the mean coarse
-    /// triangle radius. The paper's Table 1 has about a tenth (2,560 → 160,
-    /// 4,806 → 444, 3,704 → 382 triangles); a floor of 40 per object came
-    /// closer to its counts on our multi-object scenes (human 735 coarse
-    /// triangles instead of 931, chess 428 instead of 2,528) and ran the
-    /// chess scene 2.4 times faster, but its transfer error was 12.6% on the human
-    /// (7.6% with 300) and 24% on the chess scene (8.2%): small objects
-    /// simplified to 40 triangles shadow their neighbours badly (`harness
-    /// accuracy`, row `coarse-40`).
+    /// triangle radius. The paper's Table 1 has about a tenth; a floor of
+    /// 300 rather than a few dozen keeps small objects (chess pieces) from
+    /// being simplified into shapes that shadow their neighbours badly
+    /// (docs/measurements.md).
     fn default() -> Self {
         Hierarchy::TwoLevel {
             coarse_divisor: NonZeroU32::new(10).expect("10 is not zero"),
@@ -154,6 +162,22 @@ impl Pvs {
     pub const EVERY_FRAME: Pvs = Pvs::Animation {
         stride: NonZeroU32::MIN,
     };
+}
+
+/// Which compilation of the per-receiver loop and of the SH integration
+/// runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Simd {
+    /// The widest path the running CPU supports (detected at run time).
+    #[default]
+    Auto,
+    /// The build target's baseline instructions (SSE2 on x86-64): what any
+    /// CPU runs.
+    Portable,
+    /// AVX2 and FMA, with BMI1, BMI2 and POPCNT (x86-64 only).
+    Avx2,
+    /// AVX-512 F/BW/DQ/VL, with everything of [`Simd::Avx2`] (x86-64 only).
+    Avx512,
 }
 
 /// Settings of [`crate::HemiRaster`].

@@ -1,69 +1,49 @@
 //! [`HemiRaster`]: the method driven through the [`ShadowMethod`] stages.
 
-use std::f32::consts::FRAC_1_PI;
-use std::ops::Range;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use rayon::prelude::*;
-use shadow_core::sh::{self, ShOrder, ShRgb};
+use shadow_core::sh;
+use shadow_core::shading::{lambert_radiance, lambert_transfer_radiance};
 use shadow_core::{
     Brdf, Camera, Capabilities, Environment, Error, Export, FrameGeometry, Image, Profile, Result,
     Scene, ShTransfer, ShadowMethod, Stage, TransferSpace, VertexRadiance,
 };
 
-use crate::config::{BackfaceCulling, Config, Hierarchy, MaskResolution, Pvs};
+use crate::blockers::Blockers;
+use crate::config::{BackfaceCulling, Config, Hierarchy, Integration, MaskResolution, Pvs};
+use crate::engine::{Engine, Lighting, UpdateProfile, with_pipeline};
 use crate::hierarchy::TwoLevel;
-use crate::kernel::{Candidates, Corners, Reading, Scratch, Simd, receiver_mask};
-use crate::mask::{Mask, MaskRow};
 use crate::pvs::VisibleSets;
-use crate::rasterize::{Blockers, Rasterizer};
-use crate::transfer::{
-    Integration, LobeGrid, PhongLobe, TangentBasis, direct_glossy, direct_irradiance,
-    glossy_transfer, lambert_transfer_on, pixel_angle,
-};
+use crate::transfer::pixel_angle;
 
 const NAME: &str = "hemi-raster";
 
-/// Kautz, Lehtinen and Aila 2004: per vertex, every triangle of the frame
-/// (all objects: shadows between objects come for free) is rasterized into a
-/// hemispherical visibility mask, which is integrated to a world-space SH
-/// transfer vector in `update`; `relight` projects the environment to SH and
-/// `shade` dots the two (eq. 2).
+/// Kautz, Lehtinen and Aila 2004: per vertex, the blocker triangles of the
+/// frame (all objects: shadows between objects come for free) are
+/// rasterized into a hemispherical visibility mask, which `update`
+/// integrates to a world-space SH transfer vector; `relight` projects the
+/// environment to SH and `shade` dots the two (eq. 2).
 ///
 /// # Glossy materials
 /// For a [`Brdf::Phong`] object the transfer depends on the view (the
-/// paper's eq. 3 with the BRDF inside, and its §4 hand "with a slightly
-/// glossy Phong BRDF"), so it cannot be integrated in `update`: `update`
-/// keeps every vertex's mask, and `shade` integrates, per vertex of a Phong
-/// object and in parallel, the specular lobe of its own view direction
-/// against the SH basis over the mask's visible pixels
-/// (the `transfer` module's "Glossy transfer"), and dots that glossy transfer
-/// vector with the lighting: ρ_d/π · L·T + ρ_s · L·T_glossy(ω_o). With
-/// [`Integration::Direct`] the lobe weighs the prefiltered environment
-/// directly.
+/// paper's eq. 3 with the BRDF inside), so it cannot be integrated in
+/// `update`: `update` keeps every vertex's mask, and `shade` integrates,
+/// per vertex of a Phong object and in parallel, the specular lobe of its
+/// own view direction against the SH basis over the mask's visible pixels
+/// ([`glossy_transfer`](crate::glossy_transfer)), and dots that glossy
+/// transfer vector with the lighting: ρ_d/π · L·T + ρ_s · L·T_glossy(ω_o).
+/// With [`Integration::Direct`] the lobe weighs the prefiltered
+/// environment directly. Each `shade` of a glossy scene redoes this for
+/// every glossy vertex; `update` and `relight` cost what they do for
+/// Lambert.
 ///
 /// The lobe is evaluated at pixel centres, so its accuracy depends on the
-/// lobe's width against the pixel: at 32×32 the unshadowed lobe integral is
-/// within 0.6% for exponents up to 20 up to 75° from the normal (1.5% at
-/// 85°) and for exponent 100 up to 60°, but 8% off at 75° for exponent 100
-/// and 11% at 60° for 500, and worse toward grazing (the table in the
-/// `transfer` module). With the 4×4 blocks the basis is evaluated once
-/// per block, which under a lighting with detail at the block's scale costs
-/// a few percent more (2.3–2.6% relative L2 on the floor-and-square test
-/// against 0.2–0.4% with every pixel). Each `shade` of a glossy scene
-/// redoes this for every glossy vertex: on one thread, 4.9 µs per vertex
-/// with every pixel, 4.7 µs with the blocks, 9.5 µs direct (exponent 20,
-/// order 5, the bunny on its floor).
-///
-/// The SH path reflects the lighting as the SH order keeps it, and a lobe
-/// of exponent 20 resolves more than 25 coefficients hold: against the
-/// harness's Monte-Carlo reference (bunny, pure specular, exponent 20) it
-/// was 43% off under `studio` and 30% under `forest` (Lambert: 11% and 4%),
-/// where [`Integration::Direct`] was 5.7% and 6.0%. With every pixel the SH
-/// error falls with the order (12% at order 9, 7% at 14 under `forest`);
-/// with the blocks it stays at 16–17%, the basis varying within a block.
-/// For glossy materials under real maps, prefer `Direct`.
+/// lobe's width against the pixel (the table of
+/// [`glossy_transfer`](crate::glossy_transfer)); and the SH
+/// path reflects the lighting only as far as the SH order keeps it, which
+/// a lobe of exponent 20 exceeds at order 5: for glossy materials under
+/// real maps, prefer `Direct`.
 pub struct HemiRaster {
     config: Config,
     /// Built by the first `prepare` and kept: it depends on the config only.
@@ -92,212 +72,6 @@ struct Prepared {
     visible: Option<VisibleSets>,
 }
 
-/// Where one profiled update spent its time, on one thread: the split of
-/// Kautz et al.'s Table 2 ("transform includes backface culling and view
-/// transformation of blockers") and the counts behind its Table 1, as
-/// [`HemiRaster::profile_update`] reports them.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct UpdateProfile {
-    /// Receivers (vertices, all objects).
-    pub receivers: usize,
-    /// Blocker triangles considered, summed over receivers: divided by
-    /// `receivers`, Table 1's "Avg. #Tris".
-    pub candidates: u64,
-    /// Of those, the ones that survived culling and were rasterized.
-    pub survivors: u64,
-    /// Gathering the frame's blockers into the loop's arrays, and the rest
-    /// of the visibility stage outside the per-receiver loop ("Other").
-    pub gather: Duration,
-    /// Per receiver: blockers into its tangent frame, culling (horizon,
-    /// receiver, back faces, boxes below the horizon), plane cells.
-    pub transform: Duration,
-    /// Per receiver: plane-mask look-ups, ANDs and ORs.
-    pub rasterization: Duration,
-    /// Masks to transfer vectors (or, for direct integration, to irradiance).
-    pub integration: Duration,
-}
-
-impl UpdateProfile {
-    /// Into `profile`'s update entries.
-    fn record(&self, profile: &mut Profile) {
-        let update = Stage::Update;
-        profile.seconds(update, "gather", self.gather.as_secs_f64());
-        profile.seconds(update, "transform", self.transform.as_secs_f64());
-        profile.seconds(update, "rasterization", self.rasterization.as_secs_f64());
-        profile.seconds(update, "integration", self.integration.as_secs_f64());
-        profile.count(update, "receivers", self.receivers as u64);
-        profile.count(update, "candidates", self.candidates);
-        profile.count(update, "survivors", self.survivors);
-    }
-}
-
-enum Lighting {
-    Sh(ShRgb),
-    /// Prefiltered to the mask's pixel size.
-    Direct(Environment),
-}
-
-enum Engine {
-    R16(Box<Pipeline<u16>>),
-    R32(Box<Pipeline<u32>>),
-    R64(Box<Pipeline<u64>>),
-}
-
-/// Runs `$body` with `$p` bound to the engine's pipeline, whatever its
-/// resolution.
-macro_rules! with_pipeline {
-    ($engine:expr, $p:ident => $body:expr) => {
-        match $engine {
-            Engine::R16($p) => $body,
-            Engine::R32($p) => $body,
-            Engine::R64($p) => $body,
-        }
-    };
-}
-
-struct Pipeline<W: MaskRow> {
-    raster: Rasterizer<W>,
-    /// The compilation of the per-receiver loop this CPU runs.
-    simd: Simd,
-    /// The SH basis over the mask, up to the configured order.
-    basis: TangentBasis<W>,
-    /// The current frame's masks, one per vertex, all objects together.
-    masks: Vec<Mask<W>>,
-}
-
-impl<W: MaskRow> Pipeline<W> {
-    fn new(config: &Config) -> Result<Pipeline<W>> {
-        let raster = Rasterizer::new(config.lut_resolution)?;
-        Ok(Pipeline {
-            basis: TangentBasis::new(raster.grid(), config.order),
-            raster,
-            simd: config.simd.resolve()?,
-            masks: Vec::new(),
-        })
-    }
-
-    /// Every receiver's mask, in parallel; or, with `profile`, on the
-    /// calling thread with the loop's phases timed.
-    fn rasterize(
-        &mut self,
-        blockers: &Blockers,
-        hierarchy: Option<&TwoLevel>,
-        visible: Option<&VisibleSets>,
-        profile: Option<&mut UpdateProfile>,
-    ) {
-        let coarse = hierarchy.map(|h| h.coarse_level(blockers));
-        // Visible sets list every triangle they read.
-        let reading = match visible {
-            Some(_) => Reading::Slots,
-            None => Reading::Chunks,
-        };
-        let corners = Corners::new(blockers, coarse.as_ref(), reading);
-        let (lut, simd) = (self.raster.lut(), self.simd);
-        let candidates = |v: usize| match (visible, hierarchy) {
-            (Some(sets), _) => sets.candidates(&corners, v),
-            (None, Some(h)) => h.candidates(&corners, v),
-            (None, None) => Candidates::All(&corners),
-        };
-        let mask = |scratch: &mut Scratch, v: usize| {
-            receiver_mask(simd, lut, &blockers.frame(v), &candidates(v), scratch)
-        };
-        let receivers = 0..blockers.vertex_count();
-        self.masks = match profile {
-            None => receivers
-                .into_par_iter()
-                .map_init(Scratch::default, mask)
-                .collect(),
-            Some(profile) => {
-                let mut scratch = Scratch::profiling();
-                let masks = receivers
-                    .clone()
-                    .map(|v| {
-                        profile.candidates += candidates(v).count() as u64;
-                        mask(&mut scratch, v)
-                    })
-                    .collect();
-                let phases = scratch.profile().unwrap_or_default();
-                profile.transform = phases.transform;
-                profile.rasterization = phases.rasterization;
-                profile.survivors = phases.survivors;
-                profile.candidates += phases.replacements;
-                profile.receivers = receivers.len();
-                masks
-            }
-        };
-    }
-
-    fn transfer(&self, blockers: &Blockers, blocks: bool, out: &mut Vec<f32>) {
-        let n = self.basis.order().coeff_count();
-        out.resize(self.masks.len() * n, 0.0);
-        out.par_chunks_mut(n)
-            .zip(self.masks.par_iter())
-            .enumerate()
-            .for_each(|(v, (out, mask))| {
-                let frame = blockers.frame(v);
-                lambert_transfer_on(self.simd, &self.basis, mask, &frame, blocks, out)
-            });
-    }
-
-    fn direct(&self, blockers: &Blockers, environment: &Environment) -> Vec<Vec3> {
-        let grid = self.raster.grid();
-        self.masks
-            .par_iter()
-            .enumerate()
-            .map(|(v, mask)| direct_irradiance(grid, mask, &blockers.frame(v), environment))
-            .collect()
-    }
-
-    /// The specular radiance toward `eye` (without ρ_s) of the global
-    /// `vertices`, in parallel: each vertex's glossy transfer for its own
-    /// view direction, from its stored mask, dotted with the SH lighting; or,
-    /// for direct integration, the lobe-weighted sum of the environment.
-    fn glossy(
-        &self,
-        blockers: &Blockers,
-        vertices: Range<usize>,
-        eye: Vec3,
-        exponent: f32,
-        lighting: &Lighting,
-        blocks: bool,
-    ) -> Vec<Vec3> {
-        let lobes = LobeGrid::new(self.raster.grid());
-        vertices
-            .into_par_iter()
-            .map(|v| {
-                let frame = blockers.frame(v);
-                // As the harness's reference: the normal when the eye sits
-                // on the vertex.
-                let view = (eye - frame.origin()).normalize_or(frame.normal());
-                let lobe = PhongLobe::new(&frame, view, exponent);
-                let mask = &self.masks[v];
-                match lighting {
-                    Lighting::Sh(light) => {
-                        let mut t = [0.0f32; ShOrder::MAX.coeff_count()];
-                        glossy_transfer(&self.basis, &lobes, mask, &frame, &lobe, blocks, &mut t);
-                        light.dot(&t[..light.order().coeff_count()])
-                    }
-                    Lighting::Direct(env) => direct_glossy(&lobes, mask, &frame, &lobe, env),
-                }
-            })
-            .collect()
-    }
-
-    fn blocked_fraction(&self, v: usize) -> f32 {
-        self.raster.grid().coverage(&self.masks[v]) * FRAC_1_PI
-    }
-}
-
-impl Engine {
-    fn new(config: &Config) -> Result<Engine> {
-        Ok(match config.mask_resolution {
-            MaskResolution::R16 => Engine::R16(Box::new(Pipeline::new(config)?)),
-            MaskResolution::R32 => Engine::R32(Box::new(Pipeline::new(config)?)),
-            MaskResolution::R64 => Engine::R64(Box::new(Pipeline::new(config)?)),
-        })
-    }
-}
-
 impl HemiRaster {
     /// A method with `config`; the plane table is built by the first
     /// [`ShadowMethod::prepare`].
@@ -321,7 +95,7 @@ impl HemiRaster {
 
     /// How long the plane table took to build, once `prepare` has run.
     pub fn lut_build_time(&self) -> Option<Duration> {
-        Some(with_pipeline!(self.engine.as_ref()?, p => p.raster.lut().build_time()))
+        Some(with_pipeline!(self.engine.as_ref()?, p => p.raster().lut().build_time()))
     }
 
     /// The world-space transfer vector of `vertex` of `object` in the current
@@ -538,7 +312,7 @@ impl ShadowMethod for HemiRaster {
                     .as_ref()
                     .ok_or_else(|| Error::stage(NAME, "no plane table"))?;
                 Some(with_pipeline!(engine, p => {
-                    VisibleSets::build(&p.raster, frames, &cull, hierarchy.as_ref())
+                    VisibleSets::build(p.raster(), frames, &cull, hierarchy.as_ref())
                 })?)
             }
         };
@@ -612,16 +386,19 @@ impl ShadowMethod for HemiRaster {
             .as_ref()
             .ok_or_else(|| Error::stage(NAME, "shade before relight"))?;
         let n = self.config.order.coeff_count();
-        // The irradiance of vertex v, from SH transfer or from direct sums.
+        // The diffuse radiance of vertex v of albedo ρ, from SH transfer or
+        // from direct sums.
         let transfer = &self.transfer;
-        let irradiance: Box<dyn Fn(usize) -> Vec3 + '_> = match lighting {
-            Lighting::Sh(light) => Box::new(move |v| light.dot(&transfer[v * n..(v + 1) * n])),
+        let diffuse: Box<dyn Fn(Vec3, usize) -> Vec3 + '_> = match lighting {
+            Lighting::Sh(light) => Box::new(move |rho, v| {
+                lambert_transfer_radiance(rho, light, &transfer[v * n..(v + 1) * n])
+            }),
             Lighting::Direct(_) => {
                 let e = self
                     .irradiance
                     .as_deref()
                     .ok_or_else(|| Error::stage(NAME, "shade before relight"))?;
-                Box::new(move |v| e[v])
+                Box::new(move |rho, v| lambert_radiance(rho, e[v]))
             }
         };
         let (engine, blockers) = self
@@ -636,7 +413,7 @@ impl ShadowMethod for HemiRaster {
             .iter()
             .zip(&prepared.materials)
             .map(|(object, material)| {
-                let rho = material.diffuse() * FRAC_1_PI;
+                let rho = material.diffuse();
                 let range = first..first + object.vertex_count();
                 first = range.end;
                 let glossy = match *material {
@@ -654,7 +431,7 @@ impl ShadowMethod for HemiRaster {
                 range
                     .enumerate()
                     .map(|(i, v)| {
-                        let mut l = rho * irradiance(v);
+                        let mut l = diffuse(rho, v);
                         if let Some((specular, g)) = &glossy {
                             l += *specular * g[i];
                         }
@@ -710,8 +487,10 @@ impl ShadowMethod for HemiRaster {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::Pipeline;
+    use crate::mask::MaskRow;
     use crate::test_util::{grid, icosphere, projected_solid_angle};
-    use crate::transfer::tests::clipped_lobe_albedo;
+    use crate::transfer::clipped_lobe_albedo;
     use glam::Affine3A;
     use shadow_core::{Frame, Mesh, Object, Pose};
     use std::f32::consts::PI;
@@ -1097,7 +876,7 @@ mod tests {
         let mut sum = Vec3::ZERO;
         for row in 0..res {
             for col in 0..res {
-                if p.masks[v].get(row, col) {
+                if p.masks()[v].get(row, col) {
                     continue;
                 }
                 for i in 0..sub {

@@ -10,8 +10,7 @@ use rayon::prelude::*;
 use shadow_core::Result;
 
 use crate::config::check_plane_table;
-use crate::disk::DiskGrid;
-use crate::mask::{Mask, MaskRow};
+use crate::mask::{DiskGrid, Mask, MaskRow};
 
 /// Plane masks indexed by a cube-map parameterization of the plane normal
 /// m (§3.1.1): the face is the axis a of m's largest component, and the cell
@@ -155,6 +154,7 @@ impl<W: MaskRow> PlaneLut<W> {
 /// per-receiver loop computes 16 codes at once; [`PlaneLut::lookup`] uses it
 /// too, so both pick the same cells bit for bit.
 #[inline(always)]
+#[allow(unsafe_code)]
 pub(crate) fn plane_code(m: Vec3, resolution: u32) -> u32 {
     // Into the stored quarter: m_x ≥ 0 by negation, then m_y ≥ 0 by mirror.
     let negated = m.x < 0.0;
@@ -177,7 +177,8 @@ pub(crate) fn plane_code(m: Vec3, resolution: u32) -> u32 {
     // conversion vectorizes where Rust's saturating `as` does not.
     let cell = |t: f32| {
         let x = ((t * inv + 1.0) * 0.5 * n).max(0.0).min(last);
-        // SAFETY: x is finite and in [0, resolution − 1].
+        // SAFETY: `max` maps NaN and −∞ to 0 and `min` maps +∞ to `last`,
+        // so x is finite and in [0, resolution − 1], which u32 holds.
         unsafe { x.to_int_unchecked::<u32>() }
     };
     let (i, j) = (cell(u), cell(v));
