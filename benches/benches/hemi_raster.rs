@@ -38,8 +38,8 @@ fn scenes() -> Vec<Scene> {
 /// Each setup timed, labelled "name/SIMD path", without and with potentially
 /// visible sets from every frame: the two-level hierarchy on every path the
 /// CPU runs; on the widest, the 64² plane table (the fastest setup found
-/// that stays within the issue's accuracy aim: hemi-raster's README, "What
-/// each option costs in accuracy") and the flat mesh.
+/// that stays near the default's accuracy: hemi-raster's README, "Speed
+/// and accuracy") and the flat mesh.
 fn configs() -> Vec<(String, Config)> {
     let two_level = Config::default();
     let mut setups: Vec<(&str, Config)> = Simd::available()
