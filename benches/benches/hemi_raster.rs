@@ -15,6 +15,7 @@
 //!
 //! Run with `cargo bench -p benches --bench hemi_raster`. Timings on a
 //! software-only machine are CPU timings; nothing here uses the GPU.
+#![forbid(unsafe_code)]
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::gltf::GltfAsset;

@@ -4,6 +4,7 @@
 //!
 //! Run with `cargo bench -p benches --bench methods`. Error against the
 //! reference is not measured here: `harness report` prints both.
+#![forbid(unsafe_code)]
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::{methods, scenes};
