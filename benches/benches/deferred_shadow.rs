@@ -16,6 +16,7 @@
 //!
 //! Run with `cargo bench -p benches --bench deferred_shadow`. Without a GPU
 //! the adapter is Mesa's software rasterizer: the times are CPU times.
+#![forbid(unsafe_code)]
 
 use std::sync::Arc;
 

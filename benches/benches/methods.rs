@@ -13,6 +13,7 @@
 //! `harness::bench_table` prints them beside the medians.
 //!
 //! Run with `cargo bench -p benches --bench methods`.
+#![forbid(unsafe_code)]
 
 use std::path::Path;
 

@@ -12,6 +12,7 @@
 //! Run with `cargo bench -p benches --bench occlusion_query`. On a machine
 //! without a GPU the adapter is Mesa's software rasterizer, and the times
 //! are CPU times: the bench prints which.
+#![forbid(unsafe_code)]
 
 use std::sync::Arc;
 

@@ -3,6 +3,7 @@
 //!
 //! Run with `cargo bench -p benches --bench reference`. The figure that matters
 //! is rays per second (criterion's "thrpt", in elements/s).
+#![forbid(unsafe_code)]
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use harness::{

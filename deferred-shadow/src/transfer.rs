@@ -27,9 +27,10 @@ use std::time::Instant;
 use glam::{Affine3A, Mat3, Vec3};
 use rayon::prelude::*;
 use shadow_core::{
-    Environment, FrameGeometry, Mesh, PosedObject, Result, ShTransfer, TransferSpace,
+    Environment, FrameGeometry, Mesh, PosedObject, Result, ShTransfer, TangentSpace, TransferSpace,
     bvh::SceneBvh,
     qmc::{cosine_hemisphere, sobol2},
+    ray_origin,
     sh::{ShOrder, ShRgb, ShRotation, Zonal, eval_basis, project_environment},
 };
 
@@ -85,14 +86,14 @@ impl Transfer {
             .for_each(|(v, out)| {
                 let p = mesh.positions()[v];
                 let normal = mesh.normals()[v];
-                let (tangent, bitangent) = normal.any_orthonormal_pair();
+                let tangents = TangentSpace::new(normal);
+                let origin = ray_origin(p, normal, offset);
                 let shift = vertex_shift(v as u32);
                 let mut basis = [0.0f32; 64];
                 for k in 0..rays {
                     let local = cosine_hemisphere(sobol2(k, shift));
-                    let dir =
-                        (tangent * local.x + bitangent * local.y + normal * local.z).normalize();
-                    if bvh.unoccluded(p + normal * offset, dir, f32::INFINITY) {
+                    let dir = tangents.to_world(local).normalize();
+                    if bvh.unoccluded(origin, dir, f32::INFINITY) {
                         eval_basis(order, dir, &mut basis);
                         for (o, b) in out.iter_mut().zip(&basis) {
                             *o += b;

@@ -14,15 +14,16 @@
 //! order, whose radiance error is the floor that SH truncation sets under
 //! that environment: no order-5 transfer method can do better.
 
-use std::{f32::consts::FRAC_1_PI, fmt::Write, num::NonZeroU32, path::Path};
+use std::{fmt::Write, num::NonZeroU32, path::Path};
 
 use glam::Vec3;
-use hemi_raster::{Config, HemiRaster, Hierarchy, Integration, MaskResolution, Pvs};
+use hemi_raster::{Config, HemiRaster, Integration, MaskResolution, Pvs};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shadow_core::{
     Environment, Error, Export, Result, Scene,
     sh::{self, ShOrder, ShRgb, Zonal},
+    shading::lambert_transfer_radiance,
 };
 
 use crate::{
@@ -72,11 +73,8 @@ pub fn variants() -> Vec<Variant> {
         ),
         with(
             "flat",
-            "no hierarchy: every triangle at full resolution",
-            Config {
-                hierarchy: Hierarchy::Flat,
-                ..paper
-            },
+            "no hierarchy: every triangle at full resolution (Config::accurate)",
+            Config::accurate(),
         ),
         with(
             "rings-only",
@@ -96,11 +94,8 @@ pub fn variants() -> Vec<Variant> {
         ),
         with(
             "pvs",
-            "two-level with potentially visible sets built from the scored frames (§3.2): the same masks, so the same error",
-            Config {
-                pvs: Pvs::EVERY_FRAME,
-                ..paper
-            },
+            "two-level with potentially visible sets built from the scored frames (§3.2, Config::fast): the same masks, so the same error",
+            Config::fast(),
         ),
         with(
             "pvs-half",
@@ -154,11 +149,8 @@ pub fn variants() -> Vec<Variant> {
         ),
         with(
             "sh-blocks",
-            "SH from the paper's 4×4-block downsample instead of every blocked pixel",
-            Config {
-                integration: Integration::ShBlocks,
-                ..paper
-            },
+            "SH from the paper's 4×4-block downsample instead of every blocked pixel (Config::paper)",
+            Config::paper(),
         ),
         with(
             "direct",
@@ -618,7 +610,7 @@ impl Bounds {
         transfer
             .chunks_exact(n)
             .zip(&self.albedo)
-            .map(|(t, rho)| (*rho * FRAC_1_PI * self.light.dot(t)).max(Vec3::ZERO))
+            .map(|(t, &rho)| lambert_transfer_radiance(rho, &self.light, t).max(Vec3::ZERO))
             .collect()
     }
 

@@ -61,11 +61,11 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "hemi-raster:flat",
-        "the same without the hierarchy: every triangle blocks every vertex (what the hierarchy costs in error)",
+        "the same without the hierarchy: every triangle blocks every vertex (what the hierarchy costs in error; hemi_raster::Config::accurate())",
     ),
     (
         "hemi-raster:pvs",
-        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2): the same masks on those frames, from far fewer blockers",
+        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2): the same masks on those frames, from far fewer blockers (hemi_raster::Config::fast())",
     ),
     (
         "occlusion-query",
@@ -124,18 +124,14 @@ pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
         )));
     }
     if name == "hemi-raster:flat" {
-        let config = hemi_raster::Config {
-            hierarchy: hemi_raster::Hierarchy::Flat,
-            ..hemi_raster::Config::default()
-        };
-        return Ok(Box::new(hemi_raster::HemiRaster::new(config)));
+        return Ok(Box::new(hemi_raster::HemiRaster::new(
+            hemi_raster::Config::accurate(),
+        )));
     }
     if name == "hemi-raster:pvs" {
-        let config = hemi_raster::Config {
-            pvs: hemi_raster::Pvs::EVERY_FRAME,
-            ..hemi_raster::Config::default()
-        };
-        return Ok(Box::new(hemi_raster::HemiRaster::new(config)));
+        return Ok(Box::new(hemi_raster::HemiRaster::new(
+            hemi_raster::Config::fast(),
+        )));
     }
     if let Some(n) = name.strip_prefix("raytrace:") {
         let (count, vertex) = match n.strip_suffix(":vertex") {

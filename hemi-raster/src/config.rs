@@ -1,11 +1,12 @@
-//! What a user can tune, with the paper's choices as defaults.
+//! What a user can tune: plain settings, with named presets.
+//!
+//! Nothing here depends on the rest of the crate; the modules that use a
+//! setting say what it does.
 
 use std::num::NonZeroU32;
 
 use shadow_core::sh::ShOrder;
-
-use crate::kernel::Simd;
-use crate::transfer::Integration;
+use shadow_core::{Error, Result};
 
 /// Pixels per side of the visibility mask (one machine word per row).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -29,8 +30,20 @@ impl MaskResolution {
     }
 }
 
+/// How a mask becomes shading (§3, eq. 3; the `transfer` module).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integration {
+    /// SH transfer from every blocked pixel.
+    #[default]
+    ShPixels,
+    /// SH transfer from the 4×4-block grey downsample (§3.2).
+    ShBlocks,
+    /// No SH: the environment integrated over the visible pixels directly.
+    Direct,
+}
+
 /// Which blocker triangles are dropped when they face away from the receiver
-/// (see the [`rasterize`](crate::Rasterizer) docs for why this is exact for
+/// (see the [`Rasterizer`](crate::Rasterizer) docs for why this is exact for
 /// closed meshes only).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BackfaceCulling {
@@ -114,14 +127,10 @@ impl Hierarchy {
 impl Default for Hierarchy {
     /// One tenth of every object's triangles, at least 300, with the
     /// two-ring, plus the fine triangles within twice the mean coarse
-    /// triangle radius. The paper's Table 1 has about a tenth (2,560 → 160,
-    /// 4,806 → 444, 3,704 → 382 triangles); a floor of 40 per object came
-    /// closer to its counts on our multi-object scenes (human 735 coarse
-    /// triangles instead of 931, chess 428 instead of 2,528) and ran the
-    /// chess scene 2.4 times faster, but its transfer error was 12.6% on the human
-    /// (7.6% with 300) and 24% on the chess scene (8.2%): small objects
-    /// simplified to 40 triangles shadow their neighbours badly (`harness
-    /// accuracy`, row `coarse-40`).
+    /// triangle radius. The paper's Table 1 has about a tenth; a floor of
+    /// 300 rather than a few dozen keeps small objects (chess pieces) from
+    /// being simplified into shapes that shadow their neighbours badly
+    /// (docs/measurements.md).
     fn default() -> Self {
         Hierarchy::TwoLevel {
             coarse_divisor: NonZeroU32::new(10).expect("10 is not zero"),
@@ -155,18 +164,43 @@ impl Pvs {
     };
 }
 
+/// Which compilation of the per-receiver loop and of the SH integration
+/// runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Simd {
+    /// The widest path the running CPU supports (detected at run time).
+    #[default]
+    Auto,
+    /// The build target's baseline instructions (SSE2 on x86-64): what any
+    /// CPU runs.
+    Portable,
+    /// AVX2 and FMA, with BMI1, BMI2 and POPCNT (x86-64 only).
+    Avx2,
+    /// AVX-512 F/BW/DQ/VL, with everything of [`Simd::Avx2`] (x86-64 only).
+    Avx512,
+}
+
 /// Settings of [`crate::HemiRaster`].
 ///
-/// The default is the paper's setup (§3.1.1, §3.2): a 32×32 mask, a
-/// 6×128×128 plane table, 25-term SH (order 5: bands 0–4) integrated from every
-/// pixel, back faces culled on closed meshes, the two-level
-/// mesh hierarchy without PVS, and the widest SIMD path the running CPU has.
+/// [`Config::default`] is the paper's setup (§3.1.1, §3.2) but for
+/// integrating every blocked pixel: a 32×32 mask, a 6×128×128 plane table,
+/// 25-term SH (order 5: bands 0–4), back faces culled on closed meshes, the
+/// two-level mesh hierarchy without PVS, and the widest SIMD path the
+/// running CPU has. The presets:
+///
+/// - [`Config::paper`]: as published, SH from the 4×4-block downsample: a
+///   fifth less integration time, about 2 points more transfer error.
+/// - [`Config::fast`]: potentially visible sets from every frame of the
+///   scene: the same masks on those frames, 2–6× faster frames, but
+///   `prepare` must see the animation (seconds on the benchmark scenes).
+/// - [`Config::accurate`]: no hierarchy, every triangle for every receiver:
+///   0.2 points less transfer error on deforming meshes, 1–2.5× the time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Config {
     pub mask_resolution: MaskResolution,
-    /// Cells per side of each cube face of the plane table. It should grow
-    /// with the mask: the plane quantization, about 1/N in disk units, should
-    /// stay below the pixel size 2/R.
+    /// Cells per side of each cube face of the plane table: even, at least
+    /// 2. It should grow with the mask: the plane quantization, about 1/N in
+    /// disk units, should stay below the pixel size 2/R.
     pub lut_resolution: usize,
     /// SH order of the transfer vectors and lighting.
     pub order: ShOrder,
@@ -190,6 +224,126 @@ impl Default for Config {
             hierarchy: Hierarchy::default(),
             pvs: Pvs::Off,
             simd: Simd::Auto,
+        }
+    }
+}
+
+impl Config {
+    /// The paper as published: the default with the SH integrated from the
+    /// 4×4-block downsample of the mask ([`Integration::ShBlocks`], §3.2).
+    pub fn paper() -> Config {
+        Config {
+            integration: Integration::ShBlocks,
+            ..Config::default()
+        }
+    }
+
+    /// The default with potentially visible sets built by `prepare` from
+    /// every frame of the scene ([`Pvs::EVERY_FRAME`], §3.2): on those
+    /// frames the same masks, from a small fraction of the blockers. For
+    /// animations known in advance: on poses between the known frames a
+    /// set may miss a blocker.
+    pub fn fast() -> Config {
+        Config {
+            pvs: Pvs::EVERY_FRAME,
+            ..Config::default()
+        }
+    }
+
+    /// The default without the mesh hierarchy ([`Hierarchy::Flat`]): every
+    /// triangle of the frame blocks every vertex, at full resolution.
+    pub fn accurate() -> Config {
+        Config {
+            hierarchy: Hierarchy::Flat,
+            ..Config::default()
+        }
+    }
+
+    /// Checks what the settings alone decide: the plane table's resolution
+    /// (even, at least 2, a table of at most 1 GiB). Whether the CPU runs
+    /// the chosen [`Simd`] path is checked by `prepare`
+    /// ([`Simd::resolve`]).
+    pub fn validate(&self) -> Result<()> {
+        check_plane_table(self.mask_resolution.pixels_per_side(), self.lut_resolution)
+    }
+}
+
+/// The largest plane table accepted (bytes); bigger ones are configuration
+/// mistakes rather than useful accuracy.
+const MAX_TABLE_BYTES: usize = 1 << 30;
+
+/// Whether a plane table of `resolution`² cells per cube face for masks of
+/// `side`² pixels can be built: `resolution` even and at least 2, the
+/// table at most 1 GiB (three faces of `resolution`² masks, half of them
+/// reachable; see [`PlaneLut`](crate::PlaneLut)).
+pub(crate) fn check_plane_table(side: usize, resolution: usize) -> Result<()> {
+    let cells = 3usize
+        .checked_mul(resolution)
+        .and_then(|n| n.checked_mul(resolution))
+        .map(|n| n / 2);
+    let bytes = cells.and_then(|n| n.checked_mul(side * side / 8));
+    if resolution < 2 || resolution % 2 == 1 || bytes.is_none_or(|b| b > MAX_TABLE_BYTES) {
+        return Err(Error::config(
+            "hemi-raster",
+            format!(
+                "plane LUT resolution {resolution} per cube face must be even, at least 2, \
+                 and give a table of at most 1 GiB for {side}×{side} masks"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_validates() {
+        Config::default().validate().unwrap();
+    }
+
+    #[test]
+    fn the_paper_preset_validates_and_integrates_blocks() {
+        let paper = Config::paper();
+        paper.validate().unwrap();
+        assert_eq!(paper.integration, Integration::ShBlocks);
+        assert_eq!(paper.mask_resolution.pixels_per_side(), 32);
+        assert_eq!(paper.lut_resolution, 128);
+        assert_eq!(paper.order.coeff_count(), 25);
+    }
+
+    #[test]
+    fn the_fast_preset_validates_and_builds_sets_from_every_frame() {
+        let fast = Config::fast();
+        fast.validate().unwrap();
+        assert_eq!(fast.pvs, Pvs::EVERY_FRAME);
+        assert_eq!(fast.hierarchy, Hierarchy::default());
+    }
+
+    #[test]
+    fn the_accurate_preset_validates_and_is_flat() {
+        let accurate = Config::accurate();
+        accurate.validate().unwrap();
+        assert_eq!(accurate.hierarchy, Hierarchy::Flat);
+        assert_eq!(accurate.pvs, Pvs::Off);
+    }
+
+    #[test]
+    fn bad_plane_tables_do_not_validate() {
+        for (mask_resolution, lut_resolution) in [
+            (MaskResolution::R32, 0),
+            (MaskResolution::R32, 63),
+            (MaskResolution::R64, 1 << 20),
+            (MaskResolution::R16, 100_000),
+        ] {
+            let config = Config {
+                mask_resolution,
+                lut_resolution,
+                ..Config::default()
+            };
+            let e = config.validate().unwrap_err();
+            assert!(matches!(e, Error::InvalidConfig { .. }), "{e}");
         }
     }
 }

@@ -1,15 +1,15 @@
 #![doc = include_str!("../README.md")]
+#![deny(unsafe_code)]
 
+mod blockers;
 mod config;
 mod csr;
-mod disk;
+mod engine;
 mod hierarchy;
-mod kernel;
-mod lut;
 mod mask;
 mod method;
 mod pvs;
-mod rasterize;
+mod raster;
 mod transfer;
 
 #[cfg(test)]
@@ -17,14 +17,13 @@ mod properties;
 #[cfg(test)]
 mod test_util;
 
-pub use config::{BackfaceCulling, Config, Hierarchy, MaskResolution, NearRings, Pvs};
-pub use disk::{BLOCK, DiskGrid};
-pub use kernel::Simd;
-pub use lut::PlaneLut;
-pub use mask::{Mask, Mask16, Mask32, Mask64, MaskRow};
+pub use config::{
+    BackfaceCulling, Config, Hierarchy, Integration, MaskResolution, NearRings, Pvs, Simd,
+};
+pub use mask::{BLOCK, DiskGrid, Mask, Mask16, Mask32, Mask64, MaskRow};
 pub use method::HemiRaster;
-pub use rasterize::{Rasterizer, TangentFrame};
+pub use raster::{PlaneLut, Rasterizer, TangentFrame};
 pub use transfer::{
-    Integration, LOBE_CUTOFF, LobeGrid, PhongLobe, TangentBasis, direct_glossy, direct_irradiance,
+    LOBE_CUTOFF, LobeGrid, PhongLobe, TangentBasis, direct_glossy, direct_irradiance,
     glossy_transfer, pixel_angle,
 };

@@ -7,7 +7,7 @@ use proptest::prelude::*;
 use shadow_core::sh::{ShOrder, ShRgb, ShRotation, project_fn_rgb};
 
 use crate::mask::Mask;
-use crate::rasterize::{Rasterizer, TangentFrame};
+use crate::raster::{Rasterizer, TangentFrame};
 use crate::transfer::{LobeGrid, PhongLobe, TangentBasis, glossy_transfer};
 
 fn raster() -> &'static Rasterizer<u32> {

@@ -6,17 +6,15 @@
 //! by 75–88% (Table 1, "Avg. #Tris (with PVS)").
 //!
 //! # What "visible" means here
-//! A receiver's mask is the OR of its candidate triangles' masks
-//! ([`crate::kernel`]), so a set of triangles reproduces the mask exactly as
-//! soon as the OR of its masks is the OR of all: a set cover of the mask's
-//! pixels. It is built frame by frame. The triangles already in the set
-//! cover what they cover; of the others that survive culling, the greedy
-//! cover takes the one that adds the most uncovered pixels, again and again,
-//! until the mask is covered. (On the harness's human, with regions listed
-//! from the reference pose rather than replaced per frame, greedy cover kept
-//! 69.6 triangles per vertex; taking the nearest first kept 78.5, the
-//! largest first 72.6.) Each triangle's mask is [`Rasterizer::draw`]'s,
-//! which the per-receiver loop reproduces bit for bit, so **on every frame
+//! A receiver's mask is the OR of its candidate triangles' masks, so a set
+//! of triangles reproduces the mask exactly as soon as the OR of its masks
+//! is the OR of all: a set cover of the mask's pixels. It is built frame by
+//! frame. The triangles already in the set cover what they cover; of the
+//! others that survive culling, the greedy cover takes the one that adds
+//! the most uncovered pixels, again and again, until the mask is covered
+//! (which keeps fewer triangles than taking the nearest or the largest
+//! first). Each triangle's mask is [`Rasterizer::draw`]'s, which the
+//! engine's per-receiver loop reproduces bit for bit, so **on every frame
 //! the set was built from, the masks with the set are the masks without
 //! it**, to the bit (tested). On other poses a triangle that was hidden in
 //! all the known frames may show and be missed: the set is a subset of the
@@ -37,14 +35,9 @@
 //! as the loop would: itself where the frame keeps it, its kept fine
 //! triangles where the frame replaces it. Both are candidates of that frame
 //! whenever they are rasterized, so the two guarantees above hold; and a
-//! region costs only the fine triangles of it that ever showed (on the
-//! human, 4.7 of the 19.4 fine triangles a replaced chord stands for, on
-//! average). There the sets hold 82.0 members per vertex, 5.7 of them
-//! chords that keep fine triangles, and a frame adds 21.8 kept fine
-//! triangles for the chords it replaces: 103.8 blockers per vertex and
-//! frame, where the hierarchy has 1,507. On a tie the cover takes a plain
-//! candidate over the same triangle kept under a chord (106.8 blockers
-//! the other way round).
+//! region costs only the fine triangles of it that ever showed. On a tie
+//! the cover takes a plain candidate over the same triangle kept under a
+//! chord, which keeps fewer blockers.
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -52,14 +45,14 @@ use std::collections::BinaryHeap;
 use rayon::prelude::*;
 use shadow_core::{FrameGeometry, Result};
 
+use crate::blockers::{Blockers, Candidates, Entry, Layout};
 use crate::csr::Csr;
-use crate::hierarchy::TwoLevel;
-use crate::kernel::{Candidates, Corners, Entry, Reading};
+use crate::hierarchy::{TwoLevel, replaced};
 use crate::mask::{Mask, MaskRow};
-use crate::rasterize::{Blockers, Rasterizer, edge_planes, replaced};
+use crate::raster::{Rasterizer, edge_planes};
 
 /// Per receiver, the candidate triangles that showed in some known frame,
-/// by their slots in the frame's [`Corners`] (both levels in one layout).
+/// by their slots in the frame's [`Layout`] (both levels in one numbering).
 #[derive(Clone, Debug)]
 pub(crate) struct VisibleSets {
     /// Per receiver, its set: the near chords that keep fine triangles
@@ -106,15 +99,15 @@ impl VisibleSets {
             let blockers = Blockers::new(&frame?, cull);
             sets.resize(blockers.vertex_count(), Vec::new());
             let coarse = hierarchy.map(|h| h.coarse_level(&blockers));
-            let corners = Corners::new(&blockers, coarse.as_ref(), Reading::Chunks);
+            let layout = Layout::new(&blockers, coarse.as_ref());
             sets.par_iter_mut()
                 .enumerate()
                 .for_each_init(Vec::new, |shown, (v, set)| {
                     let candidates = match hierarchy {
-                        Some(h) => h.candidates(&corners, v),
-                        None => Candidates::All(&corners),
+                        Some(h) => h.candidates(&layout, v),
+                        None => Candidates::All(&layout),
                     };
-                    grow(raster, &blockers, v, &candidates, &corners, set, shown);
+                    grow(raster, &blockers, v, &candidates, &layout, set, shown);
                 });
         }
         // The members that keep fine triangles first, so that only they
@@ -138,12 +131,12 @@ impl VisibleSets {
         })
     }
 
-    /// What receiver `v` rasterizes in a frame laid out as `corners` (with
+    /// What receiver `v` rasterizes in a frame laid out as `layout` (with
     /// the hierarchy's coarse level, when there is one, as the sets were
     /// built).
-    pub(crate) fn candidates<'a>(&'a self, corners: &'a Corners, v: usize) -> Candidates<'a> {
+    pub(crate) fn candidates<'a>(&'a self, layout: &'a Layout, v: usize) -> Candidates<'a> {
         Candidates::Listed {
-            corners,
+            layout,
             entries: self.sets.of(v),
             kept: Some((
                 &self.kept,
@@ -154,20 +147,20 @@ impl VisibleSets {
 }
 
 /// Adds to `set` (sorted) the candidates of receiver `v` that show in this
-/// frame (module docs), laid out in `corners`.
+/// frame (module docs), laid out in `layout`.
 fn grow<W: MaskRow>(
     raster: &Rasterizer<W>,
     blockers: &Blockers,
     v: usize,
     candidates: &Candidates,
-    corners: &Corners,
+    layout: &Layout,
     set: &mut Vec<Member>,
     shown: &mut Vec<Shown<W>>,
 ) {
     let frame = blockers.frame(v);
     shown.clear();
     let mut covered = Mask::EMPTY;
-    let local = |entry: Entry| corners.triangle(entry.slot()).map(|p| frame.to_local(p));
+    let local = |entry: Entry| layout.triangle(entry.slot()).map(|p| frame.to_local(p));
     for entry in candidates.entries() {
         let triangle = local(entry);
         let planes = edge_planes(triangle, entry.cull());

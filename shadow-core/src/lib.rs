@@ -5,12 +5,14 @@
 //! row 0 at the top; every method returns the outgoing radiance of direct
 //! distant lighting with visibility from every object,
 //! `L_o(x, v) = ∫ L_env(ω) V(x, ω) f_r(ω, v) max(0, n·ω) dω`.
+#![forbid(unsafe_code)]
 
 mod brdf;
 mod camera;
 pub mod environment;
 mod error;
 mod export;
+pub mod frame;
 mod mesh;
 mod method;
 mod profile;
@@ -18,7 +20,9 @@ pub mod qmc;
 pub mod raster;
 mod scene;
 pub mod sh;
+pub mod shading;
 pub mod shapes;
+pub mod triangle;
 
 #[cfg(feature = "bvh")]
 pub mod bvh;
@@ -30,6 +34,7 @@ pub use camera::Camera;
 pub use environment::{Environment, EnvironmentReport};
 pub use error::{Error, Result};
 pub use export::{DirectionalVisibility, Export, ShTransfer, TransferSpace};
+pub use frame::{TangentSpace, ray_origin};
 pub use mesh::{Aabb, Adjacency, Mesh, MeshReport};
 pub use method::{Capabilities, Capability, Image, ShadowMethod, VertexRadiance};
 pub use profile::{Profile, ProfileEntry, ProfileValue, Stage};

@@ -8,6 +8,7 @@ use shadow_core::{
     Brdf, Camera, Capabilities, Environment, Error, FrameGeometry, Image, Result, Scene,
     ShadowMethod, VertexRadiance, reflect,
     sh::{self, ShOrder, ShRgb, Zonal},
+    shading::lambert_radiance,
 };
 
 /// SH lighting without shadows.
@@ -101,8 +102,7 @@ impl ShadowMethod for Unshadowed {
                     .iter()
                     .zip(object.normals())
                     .map(|(&p, &n)| {
-                        let diffuse =
-                            material.diffuse() * std::f32::consts::FRAC_1_PI * irradiance.eval(n);
+                        let diffuse = lambert_radiance(material.diffuse(), irradiance.eval(n));
                         match (material, glossy) {
                             (Brdf::Phong { specular, .. }, Some(lobe)) => {
                                 let r = reflect((eye - p).normalize_or(n), n);

@@ -31,10 +31,11 @@ use glam::Vec3;
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 use shadow_core::{
-    Brdf,
+    Brdf, TangentSpace,
     bvh::SceneBvh,
     environment::EnvironmentSampler,
     qmc::{cosine_hemisphere, sobol2},
+    ray_origin,
 };
 
 /// A point to shade: where, which way the surface faces, toward whom, with what.
@@ -104,8 +105,8 @@ impl Estimator<'_> {
     /// rays traced (directions with zero integrand cast none).
     pub fn replicate(&self, point: &ShadingPoint, rng: &mut Pcg32, size: u32) -> (Vec3, u64) {
         let n = point.normal;
-        let (t, b) = n.any_orthonormal_pair();
-        let origin = point.position + n * self.offset;
+        let tangents = TangentSpace::new(n);
+        let origin = ray_origin(point.position, n, self.offset);
         let cosine_shift = [rng.next_u32(), rng.next_u32()];
         let env_shift = [rng.next_u32(), rng.next_u32()];
         let mut rays = 0u64;
@@ -113,7 +114,7 @@ impl Estimator<'_> {
         for i in 0..size {
             // Strategy 1: cosine-weighted hemisphere.
             let local = cosine_hemisphere(sobol2(i, cosine_shift));
-            let w = t * local.x + b * local.y + n * local.z;
+            let w = tangents.to_world(local);
             let cos = n.dot(w);
             if cos > 0.0 {
                 let (pdf_env, le) = self.sampler.pdf_and_radiance(w);

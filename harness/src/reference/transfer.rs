@@ -29,8 +29,9 @@ use indicatif::ProgressBar;
 use rand_core::Rng;
 use rayon::prelude::*;
 use shadow_core::{
-    Error, FrameGeometry, Result, Scene,
+    Error, FrameGeometry, Result, Scene, TangentSpace,
     bvh::SceneBvh,
+    ray_origin,
     sh::{ShOrder, eval_basis},
 };
 
@@ -187,7 +188,7 @@ pub fn transfer_reference(
         .map_init(
             || Scratch::new(n),
             |scratch, (v, ((mean, se), &(position, normal)))| {
-                let origin = position + normal * offset;
+                let origin = ray_origin(position, normal, offset);
                 let rays = vertex_transfer(&bvh, origin, normal, v, settings, scratch);
                 let r = settings.replicates as f64;
                 for ((m, e), (&s, &s2)) in mean
@@ -225,7 +226,7 @@ fn vertex_transfer(
     settings: &TransferSettings,
     scratch: &mut Scratch,
 ) -> u64 {
-    let (t, b) = normal.any_orthonormal_pair();
+    let tangents = TangentSpace::new(normal);
     let weight = PI / settings.replicate_size as f64;
     scratch.sum.fill(0.0);
     scratch.sum_sq.fill(0.0);
@@ -235,7 +236,7 @@ fn vertex_transfer(
         scratch.replicate.fill(0.0);
         for i in 0..settings.replicate_size {
             let local = cosine_hemisphere(sobol2(i, shift));
-            let dir = t * local.x + b * local.y + normal * local.z;
+            let dir = tangents.to_world(local);
             if bvh.unoccluded(origin, dir, f32::INFINITY) {
                 eval_basis(settings.order, dir, &mut scratch.basis);
                 for (acc, &y) in scratch.replicate.iter_mut().zip(&scratch.basis) {

@@ -1,5 +1,9 @@
 //! Hemispherical rasterization of blocker triangles (Kautz et al. 2004,
-//! §3.1.1) into a vertex's visibility mask.
+//! §3.1.1) into a vertex's visibility mask: the plane look-up table
+//! ([`PlaneLut`]), the receiver's tangent frame ([`TangentFrame`]), the
+//! edge planes of a triangle and the culling they decide, and the scalar
+//! rasterizer built from them ([`Rasterizer`]), which the throughput engine
+//! reproduces bit for bit.
 //!
 //! # Why three edge planes are enough
 //! In the receiver's tangent frame (origin at the receiver, z along its
@@ -14,24 +18,6 @@
 //! a triangle straddling the horizon covers exactly the directions toward its
 //! part above the tangent plane, without clipping. Tests check both claims.
 //!
-//! # The receiver: the vertex, lifted
-//! A receiver looks from its vertex lifted along the normal by the frame's
-//! ray offset ([`Aabb::ray_offset`](shadow_core::Aabb::ray_offset), 10⁻⁴ of
-//! the scene's diagonal), the point the Monte-Carlo reference shoots its
-//! rays from. From the vertex itself the faces that meet there would
-//! subtend no solid angle (they pass through it), and at a concave crease,
-//! where the averaged normal tilts the hemisphere into the object, the
-//! directions into those faces would see through the solid: its inner
-//! walls are back faces, culled. From the lifted point the faces meeting at
-//! a concave crease rise above the tangent plane and block, as they do for
-//! any point of the surface beside the vertex; at convex and flat vertices
-//! they lie below it and are culled as before. On the harness's chess
-//! scene (lathed pieces whose profiles fold inward) this took the transfer
-//! error from 4.5% to 1.8%: a ring of pawn vertices had 71% alone. It also
-//! settles vertices lying a few µm behind another part's surface (the
-//! human's seams) and foot rims touching the board the way the reference
-//! does.
-//!
 //! Triangles with |det| ≤ 10⁻⁶·|a||b||c| (seen exactly edge-on, or through
 //! the receiver) subtend no solid angle and are skipped.
 //!
@@ -45,136 +31,19 @@
 //! let light through from behind, so it is per object (see
 //! [`crate::BackfaceCulling`]).
 
-use std::ops::Range;
+use glam::Vec3;
+use shadow_core::Result;
 
-use glam::{Mat3, Vec3};
-use shadow_core::{FrameGeometry, Result};
+use crate::mask::{DiskGrid, Mask, MaskRow};
 
-use crate::disk::DiskGrid;
-use crate::lut::PlaneLut;
-use crate::mask::{Mask, MaskRow};
+mod edges;
+mod frame;
+mod plane_table;
 
-/// Triangles whose |det| falls below this fraction of |a||b||c| lie (nearly)
-/// in a plane through the receiver and subtend no solid angle.
-const DEGENERATE: f32 = 1e-6;
-
-/// What culling decides about triangle (a, b, c) in tangent coordinates,
-/// and its three edge-plane normals oriented so that the triangle's cone is
-/// on their positive sides (meaningless when the triangle is culled).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct EdgePlanes {
-    /// Survives culling (module docs: below the horizon, through the
-    /// receiver, back-facing while culling back faces).
-    pub(crate) kept: bool,
-    /// Some corner is above the horizon (z > 0).
-    pub(crate) above: bool,
-    /// The receiver is behind the triangle's plane (det > 0).
-    pub(crate) behind: bool,
-    pub(crate) normals: [Vec3; 3],
-}
-
-/// Culls triangle (a, b, c), given in tangent coordinates, and computes its
-/// edge planes. Branch-free, so that the per-receiver loop evaluates it 16
-/// triangles at a time.
-#[inline(always)]
-pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool) -> EdgePlanes {
-    // Bitwise `|`/`&`: no branches in the vectorized loop.
-    let above = (a.z > 0.0) | (b.z > 0.0) | (c.z > 0.0);
-    let (ab, bc, ca) = (a.cross(b), b.cross(c), c.cross(a));
-    let det = ab.dot(c);
-    let scale = (a.length_squared() * b.length_squared() * c.length_squared()).sqrt();
-    // False for NaN too.
-    let spans_a_cone = det.abs() > DEGENERATE * scale;
-    let behind = det > 0.0;
-    let s = if det < 0.0 { -1.0 } else { 1.0 };
-    EdgePlanes {
-        kept: above & spans_a_cone & !(cull_back_faces & behind),
-        above,
-        behind,
-        normals: [s * ab, s * bc, s * ca],
-    }
-}
-
-/// Whether coarse triangle (a, b, c) of the receiver's body (its object and
-/// the parts touching it), given in tangent coordinates, is too close to
-/// stand for the fine surface it approximates (§3.2; see the `hierarchy`
-/// module docs), either because
-///
-/// - it is seen from behind (`behind`) with its centroid closer than twice
-///   its radius: the chord of a fold that the fine surface, not the coarse
-///   one, bends around; or
-/// - the receiver lies inside its envelope
-///   ([`in_envelope`](crate::hierarchy::in_envelope) with
-///   [`ENVELOPE`](crate::hierarchy::ENVELOPE)): close to its plane compared
-///   with its size, where its direction errs by as much as the triangle
-///   spans.
-///
-/// Tested per frame, so it follows deformation; branch-free, so that the
-/// per-receiver loop evaluates it 16 triangles at a time. See [`replaced`]
-/// for what takes its place.
-#[inline(always)]
-pub(crate) fn is_near_chord(triangle: [Vec3; 3], behind: bool) -> bool {
-    use crate::hierarchy::{ENVELOPE, in_envelope};
-    let [a, b, c] = triangle;
-    let centroid = (a + b + c) * (1.0 / 3.0);
-    let radius2 = (a - centroid)
-        .length_squared()
-        .max((b - centroid).length_squared())
-        .max((c - centroid).length_squared());
-    let chord = behind & (centroid.length_squared() < 4.0 * radius2);
-    chord | in_envelope(triangle, ENVELOPE)
-}
-
-/// Whether coarse triangle `triangle` of the receiver's body (tangent
-/// coordinates; `above` and `behind` as its [`edge_planes`] found) is
-/// dropped in this frame and replaced by the fine triangles it stands for
-/// (its region, see the `hierarchy` module docs): it is a near chord
-/// ([`is_near_chord`]) that shows above the horizon. Below it, the triangle is culled as any other
-/// (and with it the region, whose fine triangles stray from it by a fraction
-/// of its size): so the per-receiver loop, which skips whole clusters below
-/// the horizon unseen, replaces exactly the same triangles.
-#[inline(always)]
-pub(crate) fn replaced(triangle: [Vec3; 3], above: bool, behind: bool) -> bool {
-    above & is_near_chord(triangle, behind)
-}
-
-/// A receiver's tangent frame: origin at the vertex, z along its normal.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TangentFrame {
-    origin: Vec3,
-    /// Columns: tangent, bitangent, normal (world space, orthonormal).
-    to_world: Mat3,
-}
-
-impl TangentFrame {
-    /// The frame at `origin` with z along the unit `normal`; the tangents are
-    /// glam's `any_orthonormal_pair` (a continuous choice away from −z).
-    pub fn new(origin: Vec3, normal: Vec3) -> TangentFrame {
-        let (t, b) = normal.any_orthonormal_pair();
-        TangentFrame {
-            origin,
-            to_world: Mat3::from_cols(t, b, normal),
-        }
-    }
-
-    pub fn origin(&self) -> Vec3 {
-        self.origin
-    }
-
-    pub fn normal(&self) -> Vec3 {
-        self.to_world.z_axis
-    }
-
-    /// The rotation from tangent to world coordinates (columns t, b, n).
-    pub fn to_world(&self) -> Mat3 {
-        self.to_world
-    }
-
-    /// A world-space point in tangent coordinates.
-    pub fn to_local(&self, p: Vec3) -> Vec3 {
-        self.to_world.transpose() * (p - self.origin)
-    }
-}
+pub(crate) use edges::edge_planes;
+pub use frame::TangentFrame;
+pub use plane_table::PlaneLut;
+pub(crate) use plane_table::{plane_code, row_code};
 
 /// The disk grid and the plane table of one mask resolution: everything
 /// needed to rasterize triangles into masks.
@@ -229,78 +98,6 @@ impl<W: MaskRow> Rasterizer<W> {
             self.draw(t.map(|p| frame.to_local(p)), cull_back_faces, &mut mask);
         }
         mask
-    }
-}
-
-/// Every triangle of a frame, all objects together, laid out for the
-/// per-receiver loop: positions in struct-of-arrays form (so that moving them
-/// into a tangent frame is three independent vectorizable streams) and
-/// triangles as indices into them.
-#[derive(Clone, Debug)]
-pub(crate) struct Blockers {
-    x: Vec<f32>,
-    y: Vec<f32>,
-    z: Vec<f32>,
-    normals: Vec<Vec3>,
-    pub(crate) triangles: Vec<[u32; 3]>,
-    /// Per object: its triangles' range and whether its back faces are culled.
-    pub(crate) objects: Vec<(Range<usize>, bool)>,
-    /// How far each receiver sits above its vertex, along its normal: the
-    /// frame's [`Aabb::ray_offset`](shadow_core::Aabb::ray_offset), the
-    /// Monte-Carlo reference's, so that both look from the same point
-    /// (module docs, "Triangles through the receiver").
-    lift: f32,
-}
-
-impl Blockers {
-    /// Gathers a frame's vertices and triangles; `cull[o]` says whether
-    /// object o's back faces are culled.
-    pub(crate) fn new(frame: &FrameGeometry, cull: &[bool]) -> Blockers {
-        let total: usize = frame.objects.iter().map(|o| o.vertex_count()).sum();
-        let mut b = Blockers {
-            x: Vec::with_capacity(total),
-            y: Vec::with_capacity(total),
-            z: Vec::with_capacity(total),
-            normals: Vec::with_capacity(total),
-            triangles: Vec::new(),
-            objects: Vec::with_capacity(frame.objects.len()),
-            lift: frame.bounds().ray_offset(),
-        };
-        for (object, &cull) in frame.objects.iter().zip(cull) {
-            let base = b.x.len() as u32;
-            for p in object.positions() {
-                b.x.push(p.x);
-                b.y.push(p.y);
-                b.z.push(p.z);
-            }
-            b.normals.extend_from_slice(object.normals());
-            let start = b.triangles.len();
-            b.triangles
-                .extend(object.triangles().iter().map(|t| t.map(|i| i + base)));
-            b.objects.push((start..b.triangles.len(), cull));
-        }
-        b
-    }
-
-    /// Number of vertices, all objects together.
-    pub(crate) fn vertex_count(&self) -> usize {
-        self.x.len()
-    }
-
-    /// Vertex `i` (a global index), world space.
-    #[inline(always)]
-    pub(crate) fn position(&self, i: usize) -> Vec3 {
-        Vec3::new(self.x[i], self.y[i], self.z[i])
-    }
-
-    /// The tangent frame of the receiver at vertex `v` (a global index):
-    /// the vertex lifted along its normal by the frame's ray offset.
-    pub(crate) fn frame(&self, v: usize) -> TangentFrame {
-        let n = self.normals[v];
-        TangentFrame::new(
-            Vec3::new(self.x[v], self.y[v], self.z[v]) + self.lift * n,
-            n,
-        )
     }
 }
 
@@ -433,20 +230,6 @@ mod tests {
         assert!(!raster.draw(back, true, &mut mask));
         assert!(raster.draw([back[0], back[2], back[1]], true, &mut mask));
         assert!(raster.draw(back, false, &mut mask));
-    }
-
-    #[test]
-    fn tangent_frames_are_orthonormal() {
-        for n in [Vec3::Y, -Vec3::Y, Vec3::new(0.3, -0.9, 0.1).normalize()] {
-            let f = TangentFrame::new(Vec3::ONE, n);
-            let m = f.to_world();
-            assert!((m.transpose() * m - Mat3::IDENTITY).abs_diff_eq(Mat3::ZERO, 1e-5));
-            assert!(m.determinant() > 0.0);
-            assert!(
-                f.to_local(Vec3::ONE + 2.0 * n)
-                    .abs_diff_eq(2.0 * Vec3::Z, 1e-5)
-            );
-        }
     }
 
     /// Mean and worst |coverage − exact| / π over `tris` at one resolution.

@@ -7,14 +7,10 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
-use shadow_core::{Error, Result};
+use shadow_core::Result;
 
-use crate::disk::DiskGrid;
-use crate::mask::{Mask, MaskRow};
-
-/// The largest table accepted (bytes); bigger ones are configuration
-/// mistakes rather than useful accuracy.
-const MAX_BYTES: usize = 1 << 30;
+use crate::config::check_plane_table;
+use crate::mask::{DiskGrid, Mask, MaskRow};
 
 /// Plane masks indexed by a cube-map parameterization of the plane normal
 /// m (§3.1.1): the face is the axis a of m's largest component, and the cell
@@ -59,21 +55,7 @@ impl<W: MaskRow> PlaneLut<W> {
     /// number), in parallel. Fails if `resolution` is zero or odd, or the
     /// table would exceed 1 GiB.
     pub fn new(grid: &DiskGrid<W>, resolution: usize) -> Result<PlaneLut<W>> {
-        let cells = 3usize
-            .checked_mul(resolution)
-            .and_then(|n| n.checked_mul(resolution))
-            .map(|n| n / 2);
-        let bytes = cells.and_then(|n| n.checked_mul(std::mem::size_of::<Mask<W>>()));
-        if resolution < 2 || resolution % 2 == 1 || bytes.is_none_or(|b| b > MAX_BYTES) {
-            return Err(Error::config(
-                "hemi-raster",
-                format!(
-                    "plane LUT resolution {resolution} per cube face must be even, at least 2, \
-                     and give a table of at most 1 GiB for {0}×{0} masks",
-                    W::RESOLUTION
-                ),
-            ));
-        }
+        check_plane_table(W::RESOLUTION, resolution)?;
         let start = Instant::now();
         let pixels: Vec<(usize, usize, Vec3)> = grid
             .disk()
@@ -172,6 +154,7 @@ impl<W: MaskRow> PlaneLut<W> {
 /// per-receiver loop computes 16 codes at once; [`PlaneLut::lookup`] uses it
 /// too, so both pick the same cells bit for bit.
 #[inline(always)]
+#[allow(unsafe_code)]
 pub(crate) fn plane_code(m: Vec3, resolution: u32) -> u32 {
     // Into the stored quarter: m_x ≥ 0 by negation, then m_y ≥ 0 by mirror.
     let negated = m.x < 0.0;
@@ -194,7 +177,8 @@ pub(crate) fn plane_code(m: Vec3, resolution: u32) -> u32 {
     // conversion vectorizes where Rust's saturating `as` does not.
     let cell = |t: f32| {
         let x = ((t * inv + 1.0) * 0.5 * n).max(0.0).min(last);
-        // SAFETY: x is finite and in [0, resolution − 1].
+        // SAFETY: `max` maps NaN and −∞ to 0 and `min` maps +∞ to `last`,
+        // so x is finite and in [0, resolution − 1], which u32 holds.
         unsafe { x.to_int_unchecked::<u32>() }
     };
     let (i, j) = (cell(u), cell(v));

@@ -9,7 +9,7 @@ use std::marker::PhantomData;
 
 use glam::Vec3;
 
-use crate::mask::{Mask, MaskRow};
+use super::{Mask, MaskRow};
 
 /// Side of the square blocks of the downsampled mask (§3.2: "4×4 blocks").
 pub const BLOCK: usize = 4;

@@ -1,9 +1,15 @@
-//! Bit-packed visibility masks (Kautz et al. 2004, §3.1): one machine word per
-//! row of the square grid laid over the unit disk, so that rasterizing a
-//! triangle is three row-wise ANDs and an OR (§3.1.1), with no per-pixel work.
+//! The visibility mask (Kautz et al. 2004, §3.1): a square grid over the
+//! unit disk onto which a vertex's upper hemisphere projects
+//! ([`DiskGrid`]), bit-packed one machine word per row ([`Mask`]), so that
+//! rasterizing a triangle is three row-wise ANDs and an OR (§3.1.1), with
+//! no per-pixel work.
 
 use std::fmt::Debug;
 use std::ops::{BitAnd, BitOr, BitXor, Not, Shr};
+
+mod disk;
+
+pub use disk::{BLOCK, DiskGrid};
 
 /// A row of a mask: an unsigned word whose bit `c` is column `c`. Its width is
 /// the mask's resolution, so a mask is `RESOLUTION` words.
@@ -74,7 +80,7 @@ mask_row!(u64);
 
 /// A binary image of `W::RESOLUTION`² pixels over the square [−1, 1]² that
 /// holds the unit disk: row `r`, column `c` is the pixel centred on
-/// x = −1 + (2c+1)/R, y = −1 + (2r+1)/R (see [`crate::DiskGrid`]). A set bit
+/// x = −1 + (2c+1)/R, y = −1 + (2r+1)/R (see [`DiskGrid`]). A set bit
 /// means "blocked" in a visibility mask, "above the plane" in a LUT entry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Mask<W: MaskRow> {
