@@ -1,7 +1,7 @@
 //! Phase 1 of the loop, the paper's "transform": blockers moved into the
-//! receiver's frame and culled, a cluster of [`LANES`] triangles at a time
-//! with no per-triangle branch, and the plane-table cells of the survivors'
-//! three edge planes.
+//! receiver's frame and culled, [`LANES`] triangles at a time (a cluster, or
+//! as many listed triangles) with no per-triangle branch, and the
+//! plane-table cells of the survivors' three edge planes.
 
 use glam::{Mat3, Vec3};
 
@@ -38,7 +38,8 @@ impl Frame {
     }
 
     /// World point (x, y, z) in tangent coordinates: the arithmetic of
-    /// [`TangentFrame::to_local`], term for term.
+    /// [`TangentFrame::to_local`](crate::TangentFrame::to_local), term for
+    /// term.
     #[inline(always)]
     pub(super) fn local(&self, x: f32, y: f32, z: f32) -> Vec3 {
         let (t, b, n, o) = (self.t, self.b, self.n, self.o);
