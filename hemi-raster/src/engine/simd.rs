@@ -66,7 +66,9 @@ macro_rules! x86_paths {
 }
 
 x86_paths! {
-    /// AVX2 and FMA, and the bit instructions every AVX2 CPU has.
+    /// AVX2 and FMA, with the bit instructions the compiled code may use
+    /// (a virtual machine can hide BMI from an AVX2 CPU, so they are
+    /// detected too).
     avx2: ["avx2", "fma", "bmi1", "bmi2", "popcnt"];
     /// AVX-512 F/BW/DQ/VL, with everything of the AVX2 path.
     avx512: [
