@@ -106,8 +106,8 @@ impl OcclusionQuery {
     /// settings out of range.
     pub fn new(ctx: Arc<GpuContext>, config: Config) -> Result<OcclusionQuery> {
         config.check()?;
-        // The name says every choice that changes the result's kind, so
-        // that a report says which weights and which test it shows.
+        // The name says every choice that changes the result, so that a
+        // report says which weights, test and depth maps it shows.
         let mut name = format!("{NAME}-k{}", config.level.directions());
         let suffixes = [
             (config.test == VertexTest::OcclusionQuery, "-queries"),
@@ -124,6 +124,9 @@ impl OcclusionQuery {
             if applies {
                 name.push_str(suffix);
             }
+        }
+        if config.map_resolution != Config::default().map_resolution {
+            name.push_str(&format!("-map{}", config.map_resolution));
         }
         Ok(OcclusionQuery {
             name,
