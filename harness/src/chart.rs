@@ -67,11 +67,7 @@ pub fn speed_vs_error(points: &[Point], axes: Axes, path: &Path) -> Result<()> {
     let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
     draw(points, axes, &mut rgb)
         .map_err(|e| Error::format(path, format!("drawing the chart: {e}")))?;
-    let mut png = Vec::new();
-    PngEncoder::new(&mut png)
-        .write_image(&rgb, WIDTH, HEIGHT, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::format(path, format!("encoding the chart: {e}")))?;
-    write_atomic(path, &png)
+    write_png(path, &rgb)
 }
 
 fn draw(
@@ -122,13 +118,7 @@ fn draw(
             )
         }))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 16))
-        .draw()?;
+    draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -177,11 +167,7 @@ pub fn pareto(
     let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
     draw_pareto(root, curves, noise_percent, axes)
         .map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
-    let mut encoded = Vec::new();
-    PngEncoder::new(&mut encoded)
-        .write_image(&rgb, WIDTH, HEIGHT, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::format(png, format!("encoding the chart: {e}")))?;
-    write_atomic(png, &encoded)?;
+    write_png(png, &rgb)?;
     let mut text = String::new();
     let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
     draw_pareto(root, curves, noise_percent, axes)
@@ -265,14 +251,34 @@ where
             )
         }))?;
     }
+    draw_legend(&mut chart)?;
+    root.present()?;
+    Ok(())
+}
+
+/// A chart's pixels (`WIDTH` × `HEIGHT` RGB) as a PNG at `path`, atomically.
+fn write_png(path: &Path, rgb: &[u8]) -> Result<()> {
+    let mut png = Vec::new();
+    PngEncoder::new(&mut png)
+        .write_image(rgb, WIDTH, HEIGHT, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::format(path, format!("encoding the chart: {e}")))?;
+    write_atomic(path, &png)
+}
+
+/// The legend of a log-log chart, in its upper right corner.
+fn draw_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+) -> std::result::Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 15))
+        .label_font(("sans-serif", 16))
         .draw()?;
-    root.present()?;
     Ok(())
 }
 
