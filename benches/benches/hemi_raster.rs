@@ -37,7 +37,7 @@ fn scenes() -> Vec<Scene> {
 }
 
 /// Each setup timed, labelled "name/SIMD path", without and with potentially
-/// visible sets from every frame: the two-level hierarchy on every path the
+/// visible sets from every frame ([`with_sets`]): the two-level hierarchy on every path the
 /// CPU runs; on the widest, the 64² plane table (the fastest setup found
 /// that stays near the default's accuracy: hemi-raster's README, "Speed
 /// and accuracy") and the flat mesh.
@@ -65,10 +65,7 @@ fn configs() -> Vec<(String, Config)> {
     setups
         .into_iter()
         .flat_map(|(name, config)| {
-            let pvs = Config {
-                pvs: Pvs::EVERY_FRAME,
-                ..config
-            };
+            let pvs = with_sets(config);
             let path = config.simd;
             [
                 (format!("{name}/{path:?}"), config),
@@ -76,6 +73,19 @@ fn configs() -> Vec<(String, Config)> {
             ]
         })
         .collect()
+}
+
+/// `config` with visible sets from every frame, and with two levels, the
+/// wider near field of [`Config::fast`].
+fn with_sets(config: Config) -> Config {
+    Config {
+        pvs: Pvs::EVERY_FRAME,
+        hierarchy: match config.hierarchy {
+            Hierarchy::Flat => Hierarchy::Flat,
+            Hierarchy::TwoLevel { .. } => Config::fast().hierarchy,
+        },
+        ..config
+    }
 }
 
 /// Table 2, printed: one profiled update per scene and hierarchy.
@@ -104,17 +114,13 @@ fn print_split() {
     );
     for scene in scenes() {
         let frame = scene.frame_geometry(0).expect("frame 0");
-        for (label, hierarchy, pvs) in [
-            ("two-level", Hierarchy::default(), Pvs::Off),
-            ("two-l.+pvs", Hierarchy::default(), Pvs::EVERY_FRAME),
-            ("flat", Hierarchy::Flat, Pvs::Off),
-            ("flat+pvs", Hierarchy::Flat, Pvs::EVERY_FRAME),
+        for (label, config) in [
+            ("two-level", Config::default()),
+            ("two-l.+pvs", Config::fast()),
+            ("flat", Config::accurate()),
+            ("flat+pvs", with_sets(Config::accurate())),
         ] {
-            let mut method = HemiRaster::new(Config {
-                hierarchy,
-                pvs,
-                ..Config::default()
-            });
+            let mut method = HemiRaster::new(config);
             method.prepare(&scene).expect("prepare");
             method
                 .update(&frame, scene.camera())

@@ -56,11 +56,25 @@
 //! replacement follows deformation as the test does, and a coarse triangle
 //! is never replaced where it is not dropped.
 //!
-//!
 //! The near lists are computed once, in the reference pose, and kept under
 //! deformation: rings are topological; spatial neighbours that a
 //! deformation brings close are seen through the coarse mesh, and through
 //! the regions that replace it once they are close enough to be dropped.
+//!
+//! # Cracks between the levels
+//! Where fine triangles (near, or a region replacing a coarse triangle)
+//! meet the coarse triangles kept around them, the two surfaces do not
+//! join: a coarse edge lies off the fine surface by the simplification
+//! error, and the mask sees sky through the crack. A lit receiver barely
+//! notices; a receiver its body encloses (a fold, a contact, a vertex
+//! buried in an interpenetrating part), which the full mesh blocks in
+//! every direction, sees nothing else, and its radiance, near zero,
+//! becomes a few percent of the sky's. The crack's solid angle falls with
+//! its distance, and the near triangles push the cracks out to the near
+//! reach: [`Hierarchy::WIDE_NEAR_REACH`](crate::Hierarchy::WIDE_NEAR_REACH)
+//! radii instead of 2 closes them (test
+//! `receivers_enclosed_by_their_body_see_no_cracks_with_a_wide_reach`;
+//! the human's figures in the crate README).
 
 use std::ops::Range;
 
