@@ -14,10 +14,10 @@
 //! order, whose radiance error is the floor that SH truncation sets under
 //! that environment: no order-5 transfer method can do better.
 
-use std::{fmt::Write, num::NonZeroU32, path::Path};
+use std::{fmt::Write, path::Path};
 
 use glam::Vec3;
-use hemi_raster::{Config, HemiRaster, Integration, MaskResolution, Pvs};
+use hemi_raster::{Config, HemiRaster, Integration};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shadow_core::{
@@ -54,111 +54,75 @@ pub const DEFAULT_SCENES: &[&str] = &["human", "cloth", "chess"];
 /// One hemi-raster configuration of the table.
 #[derive(Clone, Copy, Debug)]
 pub struct Variant {
+    /// The row's short name.
     pub name: &'static str,
+    /// The method name its configuration is read from, as the report's
+    /// sweeps name it ([`crate::methods::hemi_raster_config`]).
+    pub method: &'static str,
     pub what: &'static str,
-    pub config: Config,
+}
+
+impl Variant {
+    /// The configuration [`Variant::method`] names.
+    pub fn config(&self) -> Result<Config> {
+        crate::methods::hemi_raster_config(self.method)
+    }
 }
 
 /// The default configuration (the paper's, every blocked pixel counted), then
 /// each option changed alone.
 pub fn variants() -> Vec<Variant> {
-    let paper = Config::default();
-    let with = |name, what, config| Variant { name, what, config };
-
+    let with = |name, method, what| Variant { name, method, what };
     vec![
         with(
             "default",
+            "hemi-raster",
             "the default, the paper's but with every blocked pixel counted: 32×32 mask, 128² plane table, order 5, two-level hierarchy",
-            paper,
         ),
         with(
             "flat",
+            "hemi-raster:flat",
             "no hierarchy: every triangle at full resolution (Config::accurate)",
-            Config::accurate(),
         ),
         with(
             "rings-only",
+            "hemi-raster:reach=0",
             "two-level, but full resolution over the two-ring only (near_reach 0)",
-            Config {
-                hierarchy: paper.hierarchy.with_near_reach(0),
-                ..paper
-            },
+        ),
+        with(
+            "reach-6",
+            "hemi-raster:reach=6",
+            "two-level with a near field of 6 coarse-triangle radii (Hierarchy::WIDE_NEAR_REACH) instead of 2",
         ),
         with(
             "coarse-40",
+            "hemi-raster:min=40",
             "two-level, small objects simplified too (at least 40 coarse triangles, not 300)",
-            Config {
-                hierarchy: paper.hierarchy.with_min_coarse_triangles(40),
-                ..paper
-            },
         ),
         with(
             "pvs",
-            "two-level with potentially visible sets built from the scored frames (§3.2, Config::fast): the same masks, so the same error",
-            Config::fast(),
+            "hemi-raster:pvs",
+            "two-level with a near field of 6 coarse-triangle radii and potentially visible sets built from the scored frames (§3.2, Config::fast)",
         ),
         with(
             "pvs-half",
-            "two-level with sets built from every other frame: half the scored frames unseen by the sets",
-            Config {
-                pvs: Pvs::Animation {
-                    stride: NonZeroU32::new(2).expect("2 is not zero"),
-                },
-                ..paper
-            },
+            "hemi-raster:pvs=2",
+            "the same with sets built from every other frame: half the scored frames unseen by the sets",
         ),
-        with(
-            "lut-32",
-            "32² plane table",
-            Config {
-                lut_resolution: 32,
-                ..paper
-            },
-        ),
-        with(
-            "lut-64",
-            "64² plane table",
-            Config {
-                lut_resolution: 64,
-                ..paper
-            },
-        ),
-        with(
-            "lut-256",
-            "256² plane table",
-            Config {
-                lut_resolution: 256,
-                ..paper
-            },
-        ),
-        with(
-            "mask-16",
-            "16×16 mask",
-            Config {
-                mask_resolution: MaskResolution::R16,
-                ..paper
-            },
-        ),
-        with(
-            "mask-64",
-            "64×64 mask",
-            Config {
-                mask_resolution: MaskResolution::R64,
-                ..paper
-            },
-        ),
+        with("lut-32", "hemi-raster:table=32", "32² plane table"),
+        with("lut-64", "hemi-raster:table=64", "64² plane table"),
+        with("lut-256", "hemi-raster:table=256", "256² plane table"),
+        with("mask-16", "hemi-raster:mask=16", "16×16 mask"),
+        with("mask-64", "hemi-raster:mask=64", "64×64 mask"),
         with(
             "sh-blocks",
+            "hemi-raster:paper",
             "SH from the paper's 4×4-block downsample instead of every blocked pixel (Config::paper)",
-            Config::paper(),
         ),
         with(
             "direct",
+            "hemi-raster:direct",
             "no SH: the prefiltered environment summed over visible pixels (no transfer vector)",
-            Config {
-                integration: Integration::Direct,
-                ..paper
-            },
         ),
     ]
 }
@@ -527,15 +491,14 @@ pub fn evaluate(
             o.mesh.name()
         )));
     }
-    if let Some(v) = plan
-        .variants
-        .iter()
-        .find(|v| v.config.order != settings.order)
-    {
-        return Err(Error::InvalidScene(format!(
-            "variant {} has SH {}, the transfer reference {}",
-            v.name, v.config.order, settings.order
-        )));
+    for v in &plan.variants {
+        let order = v.config()?.order;
+        if order != settings.order {
+            return Err(Error::InvalidScene(format!(
+                "variant {} has SH {order}, the transfer reference {}",
+                v.name, settings.order
+            )));
+        }
     }
     progress.set_message(format!("transfer reference {}", scene.name()));
     let references = scene_transfer_references(scene, settings, progress)?;
@@ -676,9 +639,10 @@ fn run_variant(
     references: &[TransferReference],
     repeats: usize,
 ) -> Result<Row> {
-    let mut method = HemiRaster::new(variant.config);
-    let n = variant.config.order.coeff_count();
-    let has_transfer = variant.config.integration != Integration::Direct;
+    let config = variant.config()?;
+    let mut method = HemiRaster::new(config);
+    let n = config.order.coeff_count();
+    let has_transfer = config.integration != Integration::Direct;
     let mut score = TransferScore::default();
     let mut breakdown = BreakdownBuilder::new(scene);
     let result = run::run_inspecting(
@@ -725,10 +689,12 @@ pub struct AccuracyReport {
 
 impl AccuracyReport {
     /// Writes `accuracy.json`, `accuracy.md` and the chart of time against
-    /// transfer error [`CHART`] into `dir`, each atomically.
+    /// transfer error [`CHART`] (and its SVG beside it) into `dir`, each
+    /// atomically.
     pub fn write(&self, dir: &Path) -> Result<()> {
         write_json_atomic(&dir.join("accuracy.json"), self)?;
-        speed_vs_error(&self.points(), AXES, &dir.join(CHART))?;
+        let png = dir.join(CHART);
+        speed_vs_error(&self.points(), AXES, &png, &png.with_extension("svg"))?;
         write_atomic(&dir.join("accuracy.md"), self.markdown().as_bytes())
     }
 

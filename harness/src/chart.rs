@@ -62,25 +62,36 @@ pub(crate) fn register_font() -> std::result::Result<(), &'static str> {
         .map_err(|_| "invalid embedded font")
 }
 
-/// Draws `points` to a PNG at `path`, written atomically.
-pub fn speed_vs_error(points: &[Point], axes: Axes, path: &Path) -> Result<()> {
+/// Charts with more points than this draw them unlabelled: the legend's
+/// colours still tell the series apart, and the per-scene charts label
+/// theirs.
+const MAX_LABELLED: usize = 40;
+
+/// Draws `points` as PNG to `png` and SVG to `svg`, written atomically.
+pub fn speed_vs_error(points: &[Point], axes: Axes, png: &Path, svg: &Path) -> Result<()> {
     let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
-    draw(points, axes, &mut rgb)
-        .map_err(|e| Error::format(path, format!("drawing the chart: {e}")))?;
-    write_png(path, &rgb)
+    let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
+    draw(root, points, axes).map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
+    write_png(png, &rgb)?;
+    let mut text = String::new();
+    let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
+    draw(root, points, axes).map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
+    write_atomic(svg, text.as_bytes())
 }
 
-fn draw(
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, plotters::coord::Shift>,
     points: &[Point],
     axes: Axes,
-    rgb: &mut [u8],
-) -> std::result::Result<(), Box<dyn std::error::Error>> {
+) -> std::result::Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
     register_font()?;
     let xy = |p: &Point| (p.error_percent.max(1e-3), p.frame_ms.max(1e-3));
     let (x_min, x_max) = bounds(points.iter().map(|p| xy(p).0));
     let (y_min, y_max) = bounds(points.iter().map(|p| xy(p).1));
 
-    let root = BitMapBackend::with_buffer(rgb, (WIDTH, HEIGHT)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(axes.title, ("sans-serif", 24))
@@ -109,6 +120,9 @@ fn draw(
             .draw_series(mine.iter().map(|p| Circle::new(xy(p), 6, color.filled())))?
             .label(*name)
             .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
+        if points.len() > MAX_LABELLED {
+            continue;
+        }
         chart.draw_series(mine.iter().map(|p| {
             let (x, y) = xy(p);
             Text::new(
@@ -347,18 +361,20 @@ mod tests {
     }
 
     #[test]
-    fn writes_a_png_of_the_chart_size() {
+    fn writes_a_png_of_the_chart_size_and_an_svg() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("chart.png");
+        let (png, svg) = (dir.path().join("chart.png"), dir.path().join("chart.svg"));
         let points = [
             point("unshadowed", "bunny", 20.0, 0.3),
             point("raytrace-16", "bunny", 5.0, 30.0),
             point("raytrace-64", "bunny", 1.0, 120.0),
         ];
-        speed_vs_error(&points, Axes::RADIANCE, &path).unwrap();
-        let img = image::load_from_memory(&std::fs::read(&path).unwrap()).unwrap();
+        speed_vs_error(&points, Axes::RADIANCE, &png, &svg).unwrap();
+        let img = image::load_from_memory(&std::fs::read(&png).unwrap()).unwrap();
         assert_eq!((img.width(), img.height()), (WIDTH, HEIGHT));
         // Something was drawn: not every pixel is white.
         assert!(img.to_rgb8().pixels().any(|p| p.0 != [255, 255, 255]));
+        let text = std::fs::read_to_string(&svg).unwrap();
+        assert!(text.starts_with("<svg") && text.contains("raytrace-64"));
     }
 }

@@ -157,7 +157,7 @@ enum Command {
     },
     /// Score hemi-raster's options (hierarchy, plane table, mask, integration)
     /// by Kautz et al.'s transfer error and by radiance error; write
-    /// accuracy.md, accuracy.json and accuracy.png (time against error).
+    /// accuracy.md, accuracy.json and accuracy.png and .svg (time against error).
     Accuracy {
         /// Only these built-in scenes (comma separated); default those of
         /// human, cloth and chess that are built in.
@@ -166,7 +166,7 @@ enum Command {
         /// One environment for every scene instead of each scene's own.
         #[arg(long)]
         env: Option<String>,
-        /// Where to write accuracy.md, accuracy.json and accuracy.png.
+        /// Where to write accuracy.md, accuracy.json and the chart.
         #[arg(long, default_value = "reports")]
         out: PathBuf,
         #[command(flatten)]
@@ -918,7 +918,7 @@ fn main() -> Result<()> {
             report.write(&out)?;
             print!("{}", report.markdown());
             println!(
-                "wrote accuracy.md, accuracy.json and {} in {}",
+                "wrote accuracy.md, accuracy.json and {} (and SVG) in {}",
                 accuracy::CHART,
                 out.display()
             );

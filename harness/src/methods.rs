@@ -1,6 +1,7 @@
 //! The methods the harness can run, by name, and the one GPU device the GPU
 //! methods of a run share.
 
+use std::num::NonZeroU32;
 use std::sync::{Arc, OnceLock};
 
 use occlusion_query::{Filtering, Level, Occluder, OcclusionQuery, VertexTest};
@@ -65,7 +66,11 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "hemi-raster:pvs",
-        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2): the same masks on those frames, from far fewer blockers (hemi_raster::Config::fast())",
+        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2) and a near field of 6 coarse-triangle radii: no light leaking into folds and contacts, from far fewer blockers (hemi_raster::Config::fast())",
+    ),
+    (
+        "hemi-raster:mask=N",
+        "hemi-raster with N×N masks (16, 32 or 64); more options: table=N (plane-table cells per cube-face side, even), order=N (SH order), reach=N (the hierarchy's near reach, in mean coarse-triangle radii), min=N (its least coarse triangle count), pvs=N (sets from every Nth frame), paper (SH from 4×4 blocks, as published), direct (no SH), combined with flat or pvs (e.g. hemi-raster:pvs:mask=16:order=3)",
     ),
     (
         "occlusion-query",
@@ -118,20 +123,10 @@ pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
         let order = ShOrder::new(9).expect("9 is a valid SH order");
         return Ok(Box::new(Unshadowed::new(order)));
     }
-    if name == "hemi-raster" {
-        return Ok(Box::new(hemi_raster::HemiRaster::new(
-            hemi_raster::Config::default(),
-        )));
-    }
-    if name == "hemi-raster:flat" {
-        return Ok(Box::new(hemi_raster::HemiRaster::new(
-            hemi_raster::Config::accurate(),
-        )));
-    }
-    if name == "hemi-raster:pvs" {
-        return Ok(Box::new(hemi_raster::HemiRaster::new(
-            hemi_raster::Config::fast(),
-        )));
+    if name.starts_with("hemi-raster") {
+        return Ok(Box::new(hemi_raster::HemiRaster::new(hemi_raster_config(
+            name,
+        )?)));
     }
     if let Some(n) = name.strip_prefix("raytrace:") {
         let (count, vertex) = match n.strip_suffix(":vertex") {
@@ -202,6 +197,82 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
     Ok(config)
 }
 
+/// The configuration `hemi-raster` followed by `options` names, applied
+/// left to right: the presets' switches (`flat`:
+/// [`hemi_raster::Config::accurate`]'s flat blockers; `pvs`:
+/// [`hemi_raster::Config::fast`]'s visible sets and wide near reach;
+/// `paper`: [`hemi_raster::Config::paper`]'s block
+/// integration; `pvs=N`: sets from every Nth frame), `direct`, and
+/// `mask=N`, `table=N`, `order=N`, `reach=N`, `min=N` (the hierarchy's
+/// least coarse triangle count).
+pub fn hemi_raster_config(name: &str) -> Result<hemi_raster::Config> {
+    use hemi_raster::{Config, Hierarchy, Integration, MaskResolution, Pvs};
+    let mut config = Config::default();
+    let bad = |what: String| Err(Error::config(name, what));
+    let Some(options) = name.strip_prefix("hemi-raster") else {
+        return bad("not a hemi-raster method".into());
+    };
+    let mut options = options.split(':');
+    if options.next() != Some("") {
+        return bad("options follow the name after ':'".into());
+    }
+    for option in options {
+        let number = |value: &str| {
+            value
+                .parse::<u32>()
+                .map_err(|_| Error::config(name, format!("{option}: not a whole number")))
+        };
+        match option.split_once('=') {
+            None if option == "flat" => config.hierarchy = Hierarchy::Flat,
+            None if option == "pvs" => {
+                config.pvs = Pvs::EVERY_FRAME;
+                config.hierarchy = config.hierarchy.with_near_reach(Hierarchy::WIDE_NEAR_REACH);
+            }
+            Some(("pvs", n)) => {
+                let stride = NonZeroU32::new(number(n)?)
+                    .ok_or_else(|| Error::config(name, "pvs=0: the stride is at least 1"))?;
+                config.pvs = Pvs::Animation { stride };
+                config.hierarchy = config.hierarchy.with_near_reach(Hierarchy::WIDE_NEAR_REACH);
+            }
+            Some(("min", n)) => {
+                config.hierarchy = config.hierarchy.with_min_coarse_triangles(number(n)?)
+            }
+            None if option == "paper" => config.integration = Integration::ShBlocks,
+            None if option == "direct" => config.integration = Integration::Direct,
+            Some(("mask", n)) => {
+                config.mask_resolution = match number(n)? {
+                    16 => MaskResolution::R16,
+                    32 => MaskResolution::R32,
+                    64 => MaskResolution::R64,
+                    _ => return bad(format!("mask={n}: masks are 16, 32 or 64 pixels a side")),
+                }
+            }
+            Some(("table", n)) => config.lut_resolution = number(n)? as usize,
+            Some(("reach", n)) => {
+                let reach = u8::try_from(number(n)?)
+                    .map_err(|_| Error::config(name, format!("{option}: at most 255")))?;
+                config.hierarchy = config.hierarchy.with_near_reach(reach);
+            }
+            Some(("order", n)) => match ShOrder::new(number(n)?) {
+                Some(order) => config.order = order,
+                _ => {
+                    return bad(format!(
+                        "order={n}: SH orders are 1 to {}",
+                        ShOrder::MAX.get()
+                    ));
+                }
+            },
+            _ => {
+                return bad(format!(
+                    "unknown option {option:?}; options are flat, pvs, pvs=N, paper, direct, mask=N, table=N, order=N, reach=N, min=N"
+                ));
+            }
+        }
+    }
+    config.validate()?;
+    Ok(config)
+}
+
 /// The configuration `deferred-shadow` followed by `options` names.
 fn deferred_shadow_config(name: &str, options: &str) -> Result<deferred_shadow::Config> {
     let mut config = deferred_shadow::Config::default();
@@ -236,6 +307,30 @@ mod tests {
     use super::*;
 
     #[test]
+    fn hemi_raster_names_read_as_its_presets() {
+        use hemi_raster::{Config, Hierarchy, Pvs};
+        let read = |name| hemi_raster_config(name).unwrap();
+        assert_eq!(read("hemi-raster"), Config::default());
+        assert_eq!(read("hemi-raster:pvs"), Config::fast());
+        assert_eq!(read("hemi-raster:flat"), Config::accurate());
+        assert_eq!(read("hemi-raster:paper"), Config::paper());
+        let half = read("hemi-raster:min=40:pvs=2");
+        assert_eq!(
+            half.pvs,
+            Pvs::Animation {
+                stride: NonZeroU32::new(2).unwrap()
+            }
+        );
+        assert_eq!(
+            half.hierarchy,
+            Hierarchy::default()
+                .with_min_coarse_triangles(40)
+                .with_near_reach(Hierarchy::WIDE_NEAR_REACH)
+        );
+        assert!(hemi_raster_config("occlusion-query").is_err());
+    }
+
+    #[test]
     fn every_listed_method_builds() {
         let Some(context) = shadow_core::gpu::test_context() else {
             return;
@@ -244,6 +339,7 @@ mod tests {
         let by_name = |name: &str| super::by_name(name, &gpu);
         for (name, _) in METHODS {
             let name = name
+                .replace("mask=N", "mask=16")
                 .replace("k=N", "k=66")
                 .replace("q=N", "q=16")
                 .replace(":N", ":8");
@@ -263,6 +359,12 @@ mod tests {
             "deferred-shadow:q=0",
             "deferred-shadow:map=x",
             "deferred-shadow:fast",
+            "hemi-raster:mask=24",
+            "hemi-raster:table=63",
+            "hemi-raster:order=0",
+            "hemi-raster:reach=300",
+            "hemi-raster:fast",
+            "hemi-rasterx",
         ] {
             let err = by_name(bad).err().unwrap();
             assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");
@@ -274,6 +376,20 @@ mod tests {
         assert_eq!(
             by_name("hemi-raster:pvs").unwrap().name(),
             "hemi-raster-pvs"
+        );
+        assert_eq!(
+            by_name("hemi-raster:pvs:mask=16:table=64:order=3:paper")
+                .unwrap()
+                .name(),
+            "hemi-raster-pvs-mask16-table64-order3-blocks"
+        );
+        assert_eq!(
+            by_name("hemi-raster:pvs:reach=2").unwrap().name(),
+            "hemi-raster-reach2-pvs"
+        );
+        assert_eq!(
+            by_name("hemi-raster:flat:pvs:direct").unwrap().name(),
+            "hemi-raster-flat-pvs-direct"
         );
         assert!(by_name("raytrace:1").is_err());
         assert!(by_name("raytrace:1:vertex").is_err());

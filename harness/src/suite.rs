@@ -109,11 +109,18 @@ impl Suite {
             },
             Family {
                 name: "hemi-raster",
-                parameter: "hierarchy, visible sets",
+                parameter: "visible sets, mask side, plane table, SH order, integration, near reach, hierarchy",
                 methods: pick(
                     &["hemi-raster:pvs", "hemi-raster"],
-                    &["hemi-raster:flat"],
-                    &[],
+                    &[
+                        "hemi-raster:pvs:mask=16",
+                        "hemi-raster:pvs:table=64",
+                        "hemi-raster:pvs:order=3",
+                        "hemi-raster:paper",
+                        "hemi-raster:reach=6",
+                        "hemi-raster:flat",
+                    ],
+                    &["hemi-raster:pvs:mask=64", "hemi-raster:pvs:order=7"],
                 ),
             },
             Family {

@@ -34,9 +34,10 @@
 //!
 //! Of the extensions that change how geometry is stored, the two the common
 //! pipelines write are read: `KHR_mesh_quantization` (attributes as integers,
-//! [`accessor`]) and `EXT_meshopt_compression` (compressed buffer views,
-//! decoded at load time, [`meshopt`]). Any other required extension, Draco
-//! compression among them, is refused by name instead of being read wrongly.
+//! the `accessor` module) and `EXT_meshopt_compression` (compressed buffer
+//! views, decoded at load time, the `meshopt` module). Any other required
+//! extension, Draco compression among them, is refused by name instead of
+//! being read wrongly.
 //! Accessors without a buffer view read as zeros and sparse accessors are
 //! applied (glTF 2.0 §3.6.2.4, §3.6.2.3). Materials, textures, cameras and
 //! lights are not read: the caller gives each object a [`Brdf`]. `COLOR_0`

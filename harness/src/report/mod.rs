@@ -346,7 +346,8 @@ impl Report {
                 })
                 .collect();
             if !points.is_empty() {
-                chart::speed_vs_error(&points, domain.axes(), &dir.join("charts").join(file))?;
+                let png = dir.join("charts").join(file);
+                chart::speed_vs_error(&points, domain.axes(), &png, &png.with_extension("svg"))?;
             }
         }
         write_json_atomic(&dir.join("report.json"), self)?;
