@@ -108,12 +108,12 @@ pub const METHODS: &[(&str, &str)] = &[
 
 /// Builds a method from its name; GPU methods run on `gpu`'s device.
 pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
-    if let Some(options) = name.strip_prefix("occlusion-query") {
-        let config = occlusion_query_config(name, options)?;
+    if name.starts_with("occlusion-query") {
+        let config = occlusion_query_config(name)?;
         return Ok(Box::new(OcclusionQuery::new(gpu.get()?, config)?));
     }
-    if let Some(options) = name.strip_prefix("deferred-shadow") {
-        let config = deferred_shadow_config(name, options)?;
+    if name.starts_with("deferred-shadow") {
+        let config = deferred_shadow_config(name)?;
         return Ok(Box::new(deferred_shadow::DeferredShadow::new(
             gpu.get()?,
             config,
@@ -154,16 +154,30 @@ pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
     ))
 }
 
-/// The configuration `occlusion-query` followed by `options` (each after a
-/// ':') names.
-fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::Config> {
+/// The options after `family` in method `name`, each after a ':'.
+fn options<'a>(name: &'a str, family: &str) -> Result<std::str::Split<'a, char>> {
+    let mut options = name
+        .strip_prefix(family)
+        .ok_or_else(|| Error::config(name, format!("not a {family} method")))?
+        .split(':');
+    if options.next() != Some("") {
+        return Err(Error::config(name, "options follow the name after ':'"));
+    }
+    Ok(options)
+}
+
+/// The value of `option` of method `name` as a whole number.
+fn whole(name: &str, option: &str, value: &str) -> Result<u32> {
+    value
+        .parse()
+        .map_err(|_| Error::config(name, format!("{option}: not a whole number")))
+}
+
+/// The configuration the options of `occlusion-query` in `name` give.
+fn occlusion_query_config(name: &str) -> Result<occlusion_query::Config> {
     let mut config = occlusion_query::Config::default();
     let bad = |what: String| Err(Error::config(name, what));
-    let mut options = options.split(':');
-    if options.next() != Some("") {
-        return bad("options follow the name after ':'".into());
-    }
-    for option in options {
+    for option in options(name, "occlusion-query")? {
         match option.split_once('=') {
             None if option == "queries" => config.test = VertexTest::OcclusionQuery,
             None if option == "paper" => config = occlusion_query::Config::paper(),
@@ -183,10 +197,7 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
                 Ok(texels) => config.occluder = Occluder::Simplified { texels },
                 Err(_) => return bad(format!("simplified={t}: not a number")),
             },
-            Some(("map", n)) => match n.parse() {
-                Ok(n) => config.map_resolution = n,
-                Err(_) => return bad(format!("map={n}: not a whole number")),
-            },
+            Some(("map", n)) => config.map_resolution = whole(name, option, n)?,
             _ => {
                 return bad(format!(
                     "unknown option {option:?}; options are queries, paper, filter, simplified, simplified=TEXELS, k=N, map=N"
@@ -197,7 +208,7 @@ fn occlusion_query_config(name: &str, options: &str) -> Result<occlusion_query::
     Ok(config)
 }
 
-/// The configuration `hemi-raster` followed by `options` names, applied
+/// The configuration the options of `hemi-raster` in `name` give, applied
 /// left to right: the presets' switches (`flat`:
 /// [`hemi_raster::Config::accurate`]'s flat blockers; `pvs`:
 /// [`hemi_raster::Config::fast`]'s visible sets and wide near reach;
@@ -209,19 +220,8 @@ pub fn hemi_raster_config(name: &str) -> Result<hemi_raster::Config> {
     use hemi_raster::{Config, Hierarchy, Integration, MaskResolution, Pvs};
     let mut config = Config::default();
     let bad = |what: String| Err(Error::config(name, what));
-    let Some(options) = name.strip_prefix("hemi-raster") else {
-        return bad("not a hemi-raster method".into());
-    };
-    let mut options = options.split(':');
-    if options.next() != Some("") {
-        return bad("options follow the name after ':'".into());
-    }
-    for option in options {
-        let number = |value: &str| {
-            value
-                .parse::<u32>()
-                .map_err(|_| Error::config(name, format!("{option}: not a whole number")))
-        };
+    for option in options(name, "hemi-raster")? {
+        let number = |value| whole(name, option, value);
         match option.split_once('=') {
             None if option == "flat" => config.hierarchy = Hierarchy::Flat,
             None if option == "pvs" => {
@@ -273,20 +273,12 @@ pub fn hemi_raster_config(name: &str) -> Result<hemi_raster::Config> {
     Ok(config)
 }
 
-/// The configuration `deferred-shadow` followed by `options` names.
-fn deferred_shadow_config(name: &str, options: &str) -> Result<deferred_shadow::Config> {
+/// The configuration the options of `deferred-shadow` in `name` give.
+fn deferred_shadow_config(name: &str) -> Result<deferred_shadow::Config> {
     let mut config = deferred_shadow::Config::default();
     let bad = |what: String| Err(Error::config(name, what));
-    let mut options = options.split(':');
-    if options.next() != Some("") {
-        return bad("options follow the name after ':'".into());
-    }
-    for option in options {
-        let number = |value: &str| {
-            value
-                .parse::<u32>()
-                .map_err(|_| Error::config(name, format!("{option}: not a whole number")))
-        };
+    for option in options(name, "deferred-shadow")? {
+        let number = |value| whole(name, option, value);
         match option.split_once('=') {
             None if option == "uncorrected" => config.self_visibility = false,
             Some(("q", q)) => config.lights = number(q)? as usize,
@@ -369,28 +361,18 @@ mod tests {
             let err = by_name(bad).err().unwrap();
             assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");
         }
-        assert_eq!(
-            by_name("hemi-raster:flat").unwrap().name(),
-            "hemi-raster-flat"
-        );
-        assert_eq!(
-            by_name("hemi-raster:pvs").unwrap().name(),
-            "hemi-raster-pvs"
-        );
-        assert_eq!(
-            by_name("hemi-raster:pvs:mask=16:table=64:order=3:paper")
-                .unwrap()
-                .name(),
-            "hemi-raster-pvs-mask16-table64-order3-blocks"
-        );
-        assert_eq!(
-            by_name("hemi-raster:pvs:reach=2").unwrap().name(),
-            "hemi-raster-reach2-pvs"
-        );
-        assert_eq!(
-            by_name("hemi-raster:flat:pvs:direct").unwrap().name(),
-            "hemi-raster-flat-pvs-direct"
-        );
+        for (method, name) in [
+            ("hemi-raster:flat", "hemi-raster-flat"),
+            ("hemi-raster:pvs", "hemi-raster-pvs"),
+            (
+                "hemi-raster:pvs:mask=16:table=64:order=3:paper",
+                "hemi-raster-pvs-mask16-table64-order3-blocks",
+            ),
+            ("hemi-raster:pvs:reach=2", "hemi-raster-reach2-pvs"),
+            ("hemi-raster:flat:pvs:direct", "hemi-raster-flat-pvs-direct"),
+        ] {
+            assert_eq!(by_name(method).unwrap().name(), name);
+        }
         assert!(by_name("raytrace:1").is_err());
         assert!(by_name("raytrace:1:vertex").is_err());
         assert_eq!(
