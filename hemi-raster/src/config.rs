@@ -103,9 +103,9 @@ pub enum Hierarchy {
 
 impl Hierarchy {
     /// The near reach of [`Config::fast`], in mean coarse-triangle radii:
-    /// far enough that the cracks where the two levels meet (about the
-    /// simplification error wide) subtend about a mask pixel (the
-    /// `hierarchy` module docs, "Cracks between the levels").
+    /// far enough that the cracks where the near list meets the coarse
+    /// mesh (about the simplification error wide) subtend about a mask
+    /// pixel (the `hierarchy` module docs, "Cracks between the levels").
     pub const WIDE_NEAR_REACH: u8 = 6;
 
     /// The same hierarchy with `near_reach` (no change to [`Hierarchy::Flat`]).
@@ -197,9 +197,9 @@ pub enum Simd {
 /// - [`Config::paper`]: as published, SH from the 4×4-block downsample: a
 ///   fifth less integration time, about 2 points more transfer error.
 /// - [`Config::fast`]: potentially visible sets from every frame of the
-///   scene and a wider near field: 2–6× faster frames, no light leaking
-///   into folds and contacts, but `prepare` must see the animation
-///   (seconds on the benchmark scenes).
+///   scene and a wider near field: 2–6× faster frames, the flat mesh's
+///   accuracy, but `prepare` must see the animation (seconds on the
+///   benchmark scenes).
 /// - [`Config::accurate`]: no hierarchy, every triangle for every receiver:
 ///   0.2 points less transfer error on deforming meshes, 1–2.5× the time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -250,7 +250,7 @@ impl Config {
     /// widened to [`Hierarchy::WIDE_NEAR_REACH`]: on those frames the masks
     /// of that hierarchy, from a small fraction of its blockers. The sets
     /// drop the hidden part of the wider near field, so it costs little
-    /// here, and it closes the cracks between the two levels that light
+    /// here, and it narrows the cracks between the two levels that light
     /// receivers enclosed by their own body (the `hierarchy` module docs,
     /// "Cracks between the levels"). For animations known in advance: on
     /// poses between the known frames a set may miss a blocker.

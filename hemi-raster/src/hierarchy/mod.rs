@@ -51,8 +51,8 @@
 //! Dropping alone leaves a hole where the triangle's far part was. So each
 //! fine triangle is given to the coarse triangle closest to its centroid
 //! (its *region*; meshopt does not report which vertices collapsed where),
-//! and the loop replaces each coarse triangle it drops by its region
-//! ([`replaced`]), in the frame it drops it: the
+//! and the loop replaces each coarse triangle it drops by its region and
+//! that region's fringe (below; [`replaced`]), in the frame it drops it: the
 //! replacement follows deformation as the test does, and a coarse triangle
 //! is never replaced where it is not dropped.
 //!
@@ -62,19 +62,22 @@
 //! the regions that replace it once they are close enough to be dropped.
 //!
 //! # Cracks between the levels
-//! Where fine triangles (near, or a region replacing a coarse triangle)
-//! meet the coarse triangles kept around them, the two surfaces do not
-//! join: a coarse edge lies off the fine surface by the simplification
-//! error, and the mask sees sky through the crack. A lit receiver barely
-//! notices; a receiver its body encloses (a fold, a contact, a vertex
-//! buried in an interpenetrating part), which the full mesh blocks in
-//! every direction, sees nothing else, and its radiance, near zero,
-//! becomes a few percent of the sky's. The crack's solid angle falls with
-//! its distance, and the near triangles push the cracks out to the near
-//! reach: [`Hierarchy::WIDE_NEAR_REACH`](crate::Hierarchy::WIDE_NEAR_REACH)
-//! radii instead of 2 closes them (test
-//! `receivers_enclosed_by_their_body_see_no_cracks_with_a_wide_reach`;
-//! the human's figures in the crate README).
+//! Where the fine triangles of a region replacing a coarse triangle meet
+//! the coarse triangles kept around it, the two surfaces do not join: a
+//! coarse edge lies off the fine surface by the simplification error, and
+//! the mask sees sky through the crack. A lit receiver barely notices; a
+//! receiver its body encloses (a fold, a contact, a vertex buried in an
+//! interpenetrating part), which the full mesh blocks in every direction,
+//! sees nothing else, and its radiance, near zero, becomes a few percent
+//! of the sky's. So a region also holds its *fringe*, the fine triangles
+//! of other regions that share a vertex with it: they reach under the
+//! neighbouring coarse triangles and close the crack (the OR of the mask
+//! absorbs the overlap). The same cracks at the edge of the near list
+//! subtend less the farther it reaches:
+//! [`Hierarchy::WIDE_NEAR_REACH`](crate::Hierarchy::WIDE_NEAR_REACH) radii
+//! instead of 2 narrows them further (test
+//! `receivers_enclosed_by_their_body_see_no_cracks`; the human's figures in
+//! the crate README).
 
 use std::ops::Range;
 
@@ -123,8 +126,8 @@ pub(crate) struct TwoLevel {
     /// by their slot in the coarse level (from its first slot), sorted.
     excluded: Csr<u32>,
     /// Per slot of the coarse level: the fine triangles the coarse triangle
-    /// there stands for (its region), which replace it for a receiver that
-    /// drops it as too close (padding slots: none).
+    /// there stands for (its region) and the region's fringe, which replace
+    /// it for a receiver that drops it as too close (padding slots: none).
     regions: Csr<Entry>,
 }
 
@@ -202,14 +205,26 @@ impl TwoLevel {
             }
             slots += range.len().next_multiple_of(CLUSTER);
         }
-        // Each fine triangle in the region of its owner (padding slots stay
-        // empty; objects used whole own nothing).
         let mut regions = vec![Vec::new(); slots];
+        // Each fine triangle in the region of its owner, with its fringe
+        // (padding slots stay empty; objects used whole own nothing).
         for (q, part) in parts.iter().enumerate() {
             for (f, &c) in part.owners.iter().enumerate() {
                 let slot = coarse_slot[coarse_objects[q].start + c as usize] as usize;
-                regions[slot].push(Entry::new(f as u32 + slot_bases[q], cull[q], false));
+                let entry = |t: u32| Entry::new(t + slot_bases[q], cull[q], false);
+                regions[slot].push(entry(f as u32));
+                for &v in &part.triangles[f] {
+                    let fringe = part
+                        .around(v)
+                        .iter()
+                        .filter(|&&u| part.owners[u as usize] != c);
+                    regions[slot].extend(fringe.map(|&u| entry(u)));
+                }
             }
+        }
+        for region in &mut regions {
+            region.sort_unstable();
+            region.dedup();
         }
         let mut near = Csr::default();
         let mut excluded = Csr::default();

@@ -171,6 +171,14 @@ impl<'a> Part<'a> {
         near
     }
 
+    /// The fine triangles around vertex `v` (on the welded mesh).
+    pub(super) fn around(&self, v: u32) -> &[u32] {
+        match &self.adjacency {
+            Some((weld, adjacency)) => adjacency.triangles_of(weld[v as usize] as usize),
+            None => &[],
+        }
+    }
+
     /// The fine triangles of this object within the spatial reach of a
     /// receiver at `p` (reference pose).
     pub(super) fn near(&self, p: Vec3) -> Vec<u32> {
