@@ -66,7 +66,7 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "hemi-raster:pvs",
-        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2) and a near field of 6 coarse-triangle radii: no light leaking into folds and contacts, from far fewer blockers (hemi_raster::Config::fast())",
+        "hemi-raster with per-vertex potentially visible sets built from the scene's own frames (§3.2) and a near field of 6 coarse-triangle radii: the flat mesh's accuracy from far fewer blockers (hemi_raster::Config::fast())",
     ),
     (
         "hemi-raster:mask=N",
