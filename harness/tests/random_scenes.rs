@@ -23,8 +23,8 @@
 //! fails; `RANDOM_SCENES_SEED=0x…` replays it alone (with `--nocapture`, each
 //! method's worst excess over its bound), `RANDOM_SCENES_CASES=N` runs N
 //! cases instead of 16. The seeds are the same on every run (proptest's
-//! stream from a fixed seed), so that a bound found too tight fails where
-//! it was found, not on a later run; `PROPTEST_RNG_SEED=N` draws others.
+//! stream from a fixed seed): the test checks a fixed set of scenes;
+//! `PROPTEST_RNG_SEED=N` draws others.
 //!
 //! # The bound
 //!
