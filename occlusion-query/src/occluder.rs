@@ -2,8 +2,6 @@
 //! simplified (model no more than visibility needs: the tested vertices stay
 //! at full resolution).
 
-use std::collections::HashMap;
-
 use glam::Vec3;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
 use shadow_core::{Error, Mesh, Result};
@@ -36,16 +34,7 @@ pub fn simplified(mesh: &Mesh, max_error: f32) -> Result<Simplified> {
         });
     }
     let positions = mesh.positions();
-    let mut first: HashMap<[u32; 3], u32> = HashMap::new();
-    let weld: Vec<u32> = positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            *first
-                .entry(p.to_array().map(f32::to_bits))
-                .or_insert(i as u32)
-        })
-        .collect();
+    let weld = mesh.welded_vertices();
     let welded: Vec<u32> = triangles
         .iter()
         .flat_map(|t| t.map(|i| weld[i as usize]))

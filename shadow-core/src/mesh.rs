@@ -205,6 +205,20 @@ impl Mesh {
         &self.positions
     }
 
+    /// Per vertex, the first vertex at the same position (equal bit for
+    /// bit): the copies a UV or normal seam makes map to one, so that
+    /// simplification and adjacency see the surface continue across it.
+    pub fn welded_vertices(&self) -> Vec<u32> {
+        let mut first = std::collections::HashMap::new();
+        (self.positions.iter().enumerate())
+            .map(|(i, p)| {
+                *first
+                    .entry(p.to_array().map(f32::to_bits))
+                    .or_insert(i as u32)
+            })
+            .collect()
+    }
+
     /// Unit normals, one per position.
     pub fn normals(&self) -> &[Vec3] {
         &self.normals
@@ -535,5 +549,12 @@ mod tests {
         let b = mesh.bounds();
         assert_eq!(b.min, Vec3::ZERO);
         assert_eq!(b.max, Vec3::ONE);
+    }
+
+    #[test]
+    fn welding_maps_copies_of_a_position_to_the_first() {
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::X, Vec3::Z];
+        let mesh = Mesh::new("seam", p.to_vec(), None, vec![[0, 1, 2], [3, 4, 2]]).unwrap();
+        assert_eq!(mesh.welded_vertices(), vec![0, 1, 2, 1, 4]);
     }
 }

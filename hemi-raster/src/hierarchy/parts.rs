@@ -1,8 +1,6 @@
 //! One object's share of the hierarchy (its coarse mesh, rings, spatial
 //! neighbours and regions), and the bodies objects form (module docs).
 
-use std::collections::HashMap;
-
 use glam::Vec3;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
 use rayon::prelude::*;
@@ -83,18 +81,8 @@ impl<'a> Part<'a> {
         if target >= triangles.len() {
             return Ok(whole);
         }
-        // Weld copies of a rest position to the first one.
         let rest = mesh.positions();
-        let mut first = HashMap::new();
-        let weld: Vec<u32> = rest
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                *first
-                    .entry(p.to_array().map(f32::to_bits))
-                    .or_insert(i as u32)
-            })
-            .collect();
+        let weld = mesh.welded_vertices();
         let welded: Vec<[u32; 3]> = triangles
             .iter()
             .map(|t| t.map(|i| weld[i as usize]))
