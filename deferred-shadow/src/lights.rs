@@ -36,7 +36,10 @@ const ITERATIONS: usize = 24;
 
 /// Splits `environment` into `count` area lights.
 ///
-/// Fails for a count of zero or more lights than the map has texels.
+/// Fails with [`Error::InvalidConfig`] for a count of zero, more lights
+/// than the map has texels, or more than the copy the lights are placed on
+/// has: a map wider than 256 texels is relaxed on a copy 256 × 128
+/// texels, where each seed takes a texel of its own.
 pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLight>> {
     let texels = environment.width() * environment.height();
     if count == 0 || count > texels {
@@ -51,6 +54,19 @@ pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLigh
         environment.clone()
     };
     let samples = Samples::of(&work);
+    if count > samples.directions.len() {
+        return Err(Error::config(
+            "deferred-shadow",
+            format!(
+                "{count} area lights for a {}×{} environment: at most {}, the texels of the {}×{} copy the lights are placed on",
+                environment.width(),
+                environment.height(),
+                samples.directions.len(),
+                work.width(),
+                work.height()
+            ),
+        ));
+    }
     let mut centres = samples.importance_seeds(count);
     for _ in 0..ITERATIONS {
         let owner = samples.nearest(&centres);
@@ -126,7 +142,8 @@ impl Samples {
 
     /// `count` directions drawn in proportion to the weights, stratified:
     /// the texel at each (k + ½)/count of the cumulative weight (a texel
-    /// drawn twice is moved to the next unused one).
+    /// drawn twice is moved to the next unused one). `count` must not
+    /// exceed the samples, or no unused one is left.
     fn importance_seeds(&self, count: usize) -> Vec<Vec3> {
         let total: f64 = self.weight.iter().map(|&w| w as f64).sum();
         let mut used = vec![false; self.weight.len()];
@@ -273,5 +290,26 @@ mod tests {
         ));
         let texels = env.width() * env.height();
         assert!(decompose(&env, texels + 1).is_err());
+    }
+
+    /// A map wider than the working copy has more texels than the copy the
+    /// lights are placed on: a count between the two is a configuration
+    /// error naming the copy's limit, returned at once (the seeds were once
+    /// searched for an unused texel forever).
+    #[test]
+    fn more_lights_than_the_working_copy_has_texels_are_refused() {
+        let (w, h) = (512, 256);
+        let env = Environment::new("wide", w, h, vec![Vec3::ONE; w * h]).unwrap();
+        let count = WORK_WIDTH * WORK_WIDTH / 2 + 1;
+        assert!(count < w * h);
+        let (send, receive) = std::sync::mpsc::channel();
+        std::thread::spawn(move || send.send(decompose(&env, count)));
+        let result = receive
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("decompose returns within 30 s");
+        let Err(Error::InvalidConfig { what, .. }) = result else {
+            panic!("{result:?}")
+        };
+        assert!(what.contains("32768"), "{what}");
     }
 }
