@@ -10,6 +10,7 @@ use shadow_core::{
     Mesh, Pose, Profile, Result, Scene, ShadowMethod, Stage, VertexRadiance,
     gpu::{GpuContext, GpuStages},
     reflect,
+    sh::Zonal,
 };
 
 use crate::config::Config;
@@ -64,10 +65,25 @@ struct Part {
     mesh: Arc<Mesh>,
     transfer: Transfer,
     material: Brdf,
+    /// How the material shades the self-shadowed radiance.
+    shading: Shading,
     /// First global vertex.
     first_vertex: usize,
     /// Model-space bounds of the mesh.
     bounds: Aabb,
+}
+
+/// A material as the self-shadowing uses it (§5.1).
+enum Shading {
+    /// ρ/π, with the 36-term transfer (eq. 2).
+    Diffuse { albedo: Vec3 },
+    /// ρ_d/π plus ρ_s times the Phong lobe over [`GLOSSY_ORDER`], with the
+    /// 16-term transfer (eq. 12–13).
+    Glossy {
+        diffuse: Vec3,
+        specular: Vec3,
+        lobe: Zonal,
+    },
 }
 
 /// What `relight` builds.
@@ -473,24 +489,56 @@ fn rigid(name: &str, t: Affine3A) -> Result<(Affine3A, Mat3)> {
     Ok((t, Mat3::from_quat(rotation)))
 }
 
+/// How object `name` shades, if [`Brdf::lambert`] or [`Brdf::phong`]
+/// would have built its material (the variants' fields are public, so a
+/// scene may hold others: a negative or NaN exponent has no Phong lobe to
+/// expand, eq. 12).
+fn shading_of(name: &str, material: Brdf) -> Result<Shading> {
+    let refused = |what: String| Error::InvalidScene(format!("{NAME}: object {name}: {what}"));
+    let checked = match material {
+        Brdf::Lambert { albedo } => Brdf::lambert(albedo),
+        Brdf::Phong {
+            diffuse,
+            specular,
+            exponent,
+        } => Brdf::phong(diffuse, specular, exponent),
+    };
+    checked.map_err(|e| match e {
+        Error::InvalidScene(what) => refused(what),
+        e => e,
+    })?;
+    match material {
+        Brdf::Phong {
+            diffuse,
+            specular,
+            exponent,
+        } if material.is_glossy() => Ok(Shading::Glossy {
+            diffuse,
+            specular,
+            lobe: Zonal::phong(GLOSSY_ORDER, exponent)
+                .ok_or_else(|| refused(format!("Phong exponent {exponent} has no lobe")))?,
+        }),
+        material => Ok(Shading::Diffuse {
+            albedo: material.diffuse(),
+        }),
+    }
+}
+
 /// The self-shadowed radiance of `part` turned by `rotation`, the
 /// view-dependent part left for later.
 fn self_terms(part: &Part, lighting: &Lighting, rotation: Mat3) -> SelfRadiance {
-    match part.material {
-        Brdf::Phong {
-            diffuse: rho,
+    match &part.shading {
+        Shading::Glossy {
+            diffuse,
             specular,
-            exponent,
-        } if part.material.is_glossy() => SelfRadiance::Glossy {
-            vertices: glossy(lighting, &part.transfer.rotated(rotation), rho, exponent),
-            specular,
+            lobe,
+        } => SelfRadiance::Glossy {
+            vertices: glossy(lighting, &part.transfer.rotated(rotation), *diffuse, lobe),
+            specular: *specular,
         },
-        material => SelfRadiance::Diffuse(diffuse(
-            lighting,
-            &part.transfer,
-            rotation,
-            material.diffuse(),
-        )),
+        Shading::Diffuse { albedo } => {
+            SelfRadiance::Diffuse(diffuse(lighting, &part.transfer, rotation, *albedo))
+        }
     }
 }
 
@@ -550,19 +598,24 @@ impl ShadowMethod for DeferredShadow {
                 }
             }
         }
+        let shadings = scene
+            .objects()
+            .iter()
+            .map(|o| shading_of(o.mesh.name(), o.material))
+            .collect::<Result<Vec<_>>>()?;
         let start = Instant::now();
         let mut parts = Vec::new();
         let mut first_vertex = 0;
-        for object in scene.objects() {
-            let order = if object.material.is_glossy() {
-                GLOSSY_ORDER
-            } else {
-                DIFFUSE_ORDER
+        for (object, shading) in scene.objects().iter().zip(shadings) {
+            let order = match shading {
+                Shading::Diffuse { .. } => DIFFUSE_ORDER,
+                Shading::Glossy { .. } => GLOSSY_ORDER,
             };
             parts.push(Part {
                 mesh: Arc::clone(&object.mesh),
                 transfer: Transfer::precompute(&object.mesh, order, self.config.rays)?,
                 material: object.material,
+                shading,
                 first_vertex,
                 bounds: object.mesh.bounds(),
             });

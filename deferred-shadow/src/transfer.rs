@@ -229,15 +229,16 @@ impl GlossyVertex {
 }
 
 /// The glossy vertices of one object under `lighting`: `world` holds its
-/// 16-term vectors already turned to world space ([`Transfer::rotated`]).
+/// 16-term vectors already turned to world space ([`Transfer::rotated`]),
+/// `lobe` is the material's Phong lobe over [`GLOSSY_ORDER`]
+/// ([`Zonal::phong`]).
 pub fn glossy(
     lighting: &Lighting,
     world: &[f32],
     diffuse: Vec3,
-    exponent: f32,
+    lobe: &Zonal,
 ) -> Vec<GlossyVertex> {
     let n = GLOSSY_ORDER.coeff_count();
-    let lobe = Zonal::phong(GLOSSY_ORDER, exponent).expect("validated exponent");
     let lambda: Vec<f32> = (0..n)
         .map(|i| lobe.eigenvalues()[(i as f32).sqrt() as usize])
         .collect();

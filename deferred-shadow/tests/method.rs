@@ -7,7 +7,8 @@ use approx::assert_relative_eq;
 use deferred_shadow::{Config, DeferredShadow};
 use glam::{Affine3A, Quat, Vec3};
 use shadow_core::{
-    Brdf, Camera, Environment, Frame, Object, Pose, Scene, ShadowMethod, gpu::test_context, shapes,
+    Brdf, Camera, Environment, Error, Frame, Object, Pose, Scene, ShadowMethod, gpu::test_context,
+    shapes,
 };
 
 fn white() -> Brdf {
@@ -241,7 +242,7 @@ fn recorded_stages_match_the_blocking_ones() {
 
 #[test]
 fn what_it_cannot_do_is_refused_clearly() {
-    use shadow_core::{Capability, Error};
+    use shadow_core::Capability;
     let Some(ctx) = test_context() else { return };
     let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
     assert!(matches!(method.shade(Vec3::ZERO), Err(Error::Stage { .. })));
@@ -405,6 +406,36 @@ fn kept_maps_match_redrawn_ones() {
     let expected = fresh.render(scene.camera()).unwrap();
     for (a, b) in image.pixels.iter().zip(&expected.pixels) {
         assert_relative_eq!(*a, *b, epsilon = 1e-5);
+    }
+}
+
+/// A Phong material built by hand, past `Brdf::phong`'s checks, with an
+/// exponent the lobe's zonal expansion has no value for: refused when the
+/// scene is prepared, naming the object, not a panic when it is lit.
+#[test]
+fn a_hand_built_phong_exponent_out_of_range_is_refused() {
+    let Some(ctx) = test_context() else { return };
+    let ball = Arc::new(shapes::uv_sphere("ball", Vec3::ZERO, 0.5, 8, 16).unwrap());
+    for exponent in [-1.0, f32::NAN, f32::INFINITY] {
+        let material = Brdf::Phong {
+            diffuse: Vec3::splat(0.3),
+            specular: Vec3::splat(0.5),
+            exponent,
+        };
+        let objects = vec![Object {
+            mesh: Arc::clone(&ball),
+            material,
+        }];
+        let scene = Scene::still("hand-built", objects, camera()).unwrap();
+        let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+        let result = method
+            .prepare(&scene)
+            .and_then(|()| method.relight(&Environment::uniform(Vec3::ONE)))
+            .and_then(|()| method.update(&scene.frame_geometry(0)?, scene.camera()));
+        assert!(
+            matches!(&result, Err(Error::InvalidScene(what)) if what.contains("ball") && what.contains("exponent")),
+            "exponent {exponent}: {result:?}"
+        );
     }
 }
 
