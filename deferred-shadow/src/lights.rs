@@ -96,10 +96,10 @@ pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLigh
 }
 
 /// A map's texels as points on the sphere with their weights.
-struct Samples {
-    directions: Vec<Vec3>,
-    solid_angle: Vec<f32>,
-    radiance: Vec<Vec3>,
+pub(crate) struct Samples {
+    pub(crate) directions: Vec<Vec3>,
+    pub(crate) solid_angle: Vec<f32>,
+    pub(crate) radiance: Vec<Vec3>,
     /// Luminance × solid angle, plus a little of the mean so that a black
     /// region still pulls its centre toward its middle.
     weight: Vec<f32>,
@@ -109,7 +109,7 @@ impl Samples {
     /// The texels of `env`, each split into f × f finer ones (f the least
     /// whole factor that makes the map at least [`MIN_WIDTH`] wide): the
     /// same piecewise-constant radiance, so every integral is the map's.
-    fn of(env: &Environment) -> Samples {
+    pub(crate) fn of(env: &Environment) -> Samples {
         let f = MIN_WIDTH.div_ceil(env.width()).max(1);
         let (w, h) = (env.width() * f, env.height() * f);
         let mut s = Samples {
