@@ -5,18 +5,40 @@
 //! Vertices are pulled from storage buffers in every shader (no vertex
 //! buffers): a triangle's corners are `triangles[t]` (x, y, z, its object in
 //! w), model-space positions carry their object's index in w, and each
-//! object's pose is a matrix of `objects`. Moving an object rewrites one
-//! matrix; nothing else is uploaded.
+//! object's pose is a matrix of `objects`. Moving an object uploads the
+//! matrices; nothing else.
+//!
+//! # Uploads
+//!
+//! Every upload from the CPU (poses, lights, the plan of the maps, the
+//! per-vertex shading, a recording's camera and parameters) goes into a
+//! buffer made for it, written by `queue.write_buffer`: that lands before
+//! the next submission, and a buffer that commands already recorded read is
+//! never written again. Several recordings into one encoder
+//! ([`shadow_core::gpu::GpuStages`]: two cameras, a render and a shade)
+//! each read their own data; what the GPU writes (maps, images) is ordered
+//! by the encoder itself.
+//!
+//! # Errors
+//!
+//! Every method that creates or writes a resource runs inside
+//! [`GpuContext::capture`], so that a validation or out-of-memory error is
+//! that call's [`Error::Gpu`] on any device, never a message on standard
+//! error (the device [`GpuContext::new`] opens) or a panic (wgpu's default
+//! handler on a host's device). Plans larger than a storage buffer of the
+//! device may hold are refused before anything is allocated
+//! ([`check_storage`]).
 
+use std::num::NonZeroU64;
 use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use shadow_core::{
-    Brdf, Camera, Result,
+    Brdf, Camera, Error, Mesh, Result,
     gpu::{
         GpuContext,
-        uniforms::{Slots, dynamic_uniform, storage, uniform},
+        uniforms::{dynamic_uniform, storage, uniform},
     },
     raster::clip_from_world,
 };
@@ -91,6 +113,36 @@ pub struct Geometry {
     pub triangle_ranges: Vec<std::ops::Range<u32>>,
 }
 
+impl Geometry {
+    /// The meshes of a scene's objects, in order, one after another.
+    pub fn new<'a>(meshes: impl IntoIterator<Item = &'a Mesh>) -> Geometry {
+        let mut geometry = Geometry {
+            vertices: Vec::new(),
+            triangles: Vec::new(),
+            triangle_ranges: Vec::new(),
+        };
+        for (o, mesh) in meshes.into_iter().enumerate() {
+            let base = geometry.vertices.len() as u32;
+            geometry.vertices.extend(
+                mesh.positions()
+                    .iter()
+                    .zip(mesh.normals())
+                    .map(|(p, n)| [p.extend(o as f32), n.extend(0.0)]),
+            );
+            let first = geometry.triangles.len() as u32;
+            geometry.triangles.extend(
+                mesh.triangles()
+                    .iter()
+                    .map(|t| [t[0] + base, t[1] + base, t[2] + base, o as u32]),
+            );
+            geometry
+                .triangle_ranges
+                .push(first..geometry.triangles.len() as u32);
+        }
+        geometry
+    }
+}
+
 /// Maps rendered and blurred in one batch: the atlas holds this many
 /// tiles.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -112,7 +164,83 @@ const MAX_ATLAS: u32 = 8192;
 /// The smallest buffer: larger than any one element a shader binds.
 const MIN_BUFFER: u64 = 256;
 
-/// A storage buffer that grows to fit.
+/// The most bytes one storage buffer may hold on a device of `limits`:
+/// the method binds each whole.
+fn storage_limit(limits: &wgpu::Limits) -> u64 {
+    limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+}
+
+/// Refuses, before anything is allocated, a plan whose storage does not fit
+/// a device of `limits`: `maps` occlusion maps of `resolution`² texels, one
+/// `f32` each, in one buffer (the paper's q lights times the pairs of
+/// occluder and receiving groups, §4.2.2–4.2.3), and a mask word per
+/// triangle and light (`triangles` × `lights`, after `ranges` words of map
+/// ranges). The [`Error::InvalidConfig`] names the settings (`q`, `map`, as
+/// the harness spells them), the bytes they need and the device's limit.
+pub fn check_storage(
+    lights: u32,
+    resolution: u32,
+    maps: usize,
+    ranges: usize,
+    triangles: usize,
+    limits: &wgpu::Limits,
+) -> Result<()> {
+    let limit = storage_limit(limits);
+    let what = format!(
+        "the device binds at most {limit} bytes in one storage buffer \
+         (the smaller of its max_storage_buffer_binding_size and max_buffer_size)"
+    );
+    let map_bytes = 4 * u64::from(resolution).pow(2) * maps as u64;
+    if map_bytes > limit {
+        return Err(Error::config(
+            "deferred-shadow",
+            format!(
+                "q = {lights} area lights and {resolution}×{resolution}-texel occlusion maps \
+                 (map = {resolution}) need {maps} maps on this scene, {map_bytes} bytes, and {what}: \
+                 fewer lights, smaller maps or occluders grouped (§4.2.3) need fewer"
+            ),
+        ));
+    }
+    let mask_bytes = 4 * (ranges as u64 + triangles as u64 * u64::from(lights));
+    if mask_bytes > limit {
+        return Err(Error::config(
+            "deferred-shadow",
+            format!(
+                "q = {lights} area lights need a mask word per light for each of the scene's \
+                 {triangles} triangles, {mask_bytes} bytes, and {what}: fewer lights need fewer"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A buffer made for `values` (at least [`MIN_BUFFER`] bytes, zero past
+/// them), with `usage` and `COPY_DST`: nothing recorded before reads it, so
+/// the write, which lands before the next submission, is seen by exactly
+/// the commands recorded from now on that bind it.
+fn upload<T: Pod>(
+    ctx: &GpuContext,
+    label: &str,
+    values: &[T],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    let bytes: &[u8] = bytemuck::cast_slice(values);
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: (bytes.len() as u64).max(MIN_BUFFER),
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    if !bytes.is_empty() {
+        ctx.queue.write_buffer(&buffer, 0, bytes);
+    }
+    buffer
+}
+
+/// A storage buffer the GPU writes (by shaders, or copies: `COPY_DST`),
+/// which grows to fit.
 struct Growing {
     buffer: wgpu::Buffer,
     label: &'static str,
@@ -134,22 +262,20 @@ impl Growing {
         }
     }
 
-    /// At least `bytes` long (contents lost when it grows).
+    /// At least `bytes` long (contents lost when it grows): the next power
+    /// of two, or what the device binds when that is less.
     fn reserve(&mut self, ctx: &GpuContext, bytes: u64) {
         if self.buffer.size() < bytes {
+            let room = bytes
+                .next_power_of_two()
+                .min(storage_limit(&ctx.device.limits()));
             self.buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(self.label),
-                size: bytes.next_power_of_two(),
+                size: room.max(bytes),
                 usage: self.usage,
                 mapped_at_creation: false,
             });
         }
-    }
-
-    fn write<T: Pod>(&mut self, ctx: &GpuContext, values: &[T]) {
-        let bytes: &[u8] = bytemuck::cast_slice(values);
-        self.reserve(ctx, bytes.len() as u64);
-        ctx.queue.write_buffer(&self.buffer, 0, bytes);
     }
 }
 
@@ -184,25 +310,22 @@ pub struct Gpu {
     vertex_count: u32,
     objects: wgpu::Buffer,
     lights: wgpu::Buffer,
-    maps: Growing,
+    maps: wgpu::Buffer,
     /// The maps' ranges per receiving group and light, then the triangles'
     /// masks (deferred.wgsl's `culling`).
-    culling: Growing,
+    culling: wgpu::Buffer,
     masks_offset: u32,
-    instances: Growing,
+    instances: wgpu::Buffer,
     blurred: Growing,
     /// The previous frame's maps, from which kept maps are copied.
     previous: Growing,
     /// (previous index, index, count) of each run of kept maps.
     copies: Vec<(u32, u32, u32)>,
     /// The maps drawn, tile after tile.
-    drawn: Growing,
+    drawn: wgpu::Buffer,
     rows: Growing,
-    shading: Growing,
+    shading: wgpu::Buffer,
     vertex_radiance: wgpu::Buffer,
-    atlas_blocks: Slots<AtlasBlock>,
-    params: Slots<Params>,
-    view: wgpu::Buffer,
     coverage: Option<(u32, wgpu::TextureView)>,
     /// The image's targets (1×1 until an image is recorded).
     targets: Targets,
@@ -214,10 +337,6 @@ pub struct Gpu {
     /// Maps of the current plan.
     pub map_count: u32,
 }
-
-/// Slot of the per-vertex and per-pixel parameters.
-const VERTEX_SLOT: usize = 0;
-const PIXEL_SLOT: usize = 1;
 
 fn shader(ctx: &GpuContext, label: &str, source: &str) -> wgpu::ShaderModule {
     let source = format!("{}\n{source}", include_str!("shaders/common.wgsl"));
@@ -335,6 +454,25 @@ impl Gpu {
         objects: &[GpuObject],
         resolution: u32,
         self_visibility: bool,
+    ) -> Result<Gpu> {
+        let owner = Arc::clone(&ctx);
+        ctx.capture("deferred-shadow: pipelines and buffers", || {
+            Ok(Gpu::build(
+                owner,
+                geometry,
+                objects,
+                resolution,
+                self_visibility,
+            ))
+        })
+    }
+
+    fn build(
+        ctx: Arc<GpuContext>,
+        geometry: &Geometry,
+        objects: &[GpuObject],
+        resolution: u32,
+        self_visibility: bool,
     ) -> Gpu {
         let c = &*ctx;
         let vertex = wgpu::ShaderStages::VERTEX;
@@ -404,7 +542,7 @@ impl Gpu {
 
         let deferred_module = shader(c, "deferred", include_str!("shaders/deferred.wgsl"));
         let mut deferred_entries = vec![
-            dynamic_uniform(0, cs),
+            uniform(0, cs),
             storage(1, true, cs),
             storage(2, true, cs),
             storage(3, true, cs),
@@ -429,18 +567,12 @@ impl Gpu {
 
         let storage_usage = wgpu::BufferUsages::STORAGE;
         let vertex_count = geometry.vertices.len() as u32;
-        let buffer = |label: &str, size: u64, usage| {
-            c.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let none: &[u32] = &[];
         Gpu {
-            vertices: c.create_buffer_init("vertices", &geometry.vertices, storage_usage),
-            triangles: c.create_buffer_init("triangles", &geometry.triangles, storage_usage),
-            indices: c.create_buffer_init(
+            vertices: upload(c, "vertices", &geometry.vertices, storage_usage),
+            triangles: upload(c, "triangles", &geometry.triangles, storage_usage),
+            indices: upload(
+                c,
                 "indices",
                 &geometry
                     .triangles
@@ -451,20 +583,17 @@ impl Gpu {
             ),
             triangle_ranges: geometry.triangle_ranges.clone(),
             vertex_count,
-            objects: c.create_buffer_init(
-                "objects",
-                objects,
-                storage_usage | wgpu::BufferUsages::COPY_DST,
-            ),
-            lights: buffer(
+            objects: upload(c, "objects", objects, storage_usage),
+            lights: upload(
+                c,
                 "lights",
-                (MAX_LIGHTS * size_of::<GpuLight>()) as u64,
-                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                &[GpuLight::zeroed(); MAX_LIGHTS],
+                wgpu::BufferUsages::UNIFORM,
             ),
-            maps: Growing::new(c, "maps", storage_usage),
-            culling: Growing::new(c, "map ranges and masks", storage_usage),
+            maps: upload(c, "maps", none, storage_usage),
+            culling: upload(c, "map ranges and masks", none, storage_usage),
             masks_offset: 0,
-            instances: Growing::new(c, "map instances", storage_usage),
+            instances: upload(c, "map instances", none, storage_usage),
             blurred: Growing::new(
                 c,
                 "occlusion maps",
@@ -476,21 +605,15 @@ impl Gpu {
                 storage_usage | wgpu::BufferUsages::COPY_SRC,
             ),
             copies: Vec::new(),
-            drawn: Growing::new(c, "maps drawn", storage_usage),
+            drawn: upload(c, "maps drawn", none, storage_usage),
             rows: Growing::new(c, "blurred rows", storage_usage),
-            shading: Growing::new(c, "vertex shading", storage_usage),
-            vertex_radiance: buffer(
-                "vertex radiance",
-                16 * vertex_count as u64,
-                storage_usage | wgpu::BufferUsages::COPY_SRC,
-            ),
-            atlas_blocks: Slots::new(c, "atlas", 1),
-            params: Slots::new(c, "deferred", 2),
-            view: buffer(
-                "view",
-                size_of::<Mat4>() as u64,
-                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            ),
+            shading: upload(c, "vertex shading", none, storage_usage),
+            vertex_radiance: c.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("vertex radiance"),
+                size: (16 * vertex_count as u64).max(MIN_BUFFER),
+                usage: storage_usage | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
             coverage: None,
             targets: Targets::new(c, 1, 1),
             cover,
@@ -512,33 +635,85 @@ impl Gpu {
         }
     }
 
-    /// The objects' poses and materials.
-    pub fn set_objects(&self, objects: &[GpuObject]) {
-        self.ctx
-            .queue
-            .write_buffer(&self.objects, 0, bytemuck::cast_slice(objects));
+    /// Fails with [`Error::InvalidConfig`] when the maps of `plan`, or the
+    /// masks of its lights, would not fit in one storage buffer of the
+    /// device ([`check_storage`]).
+    pub fn check_plan(&self, plan: &Plan) -> Result<()> {
+        check_storage(
+            self.light_count,
+            self.resolution,
+            plan.maps.len(),
+            2 * plan.ranges.len(),
+            self.triangle_count() as usize,
+            &self.ctx.device.limits(),
+        )
     }
 
-    /// At most [`MAX_LIGHTS`].
-    pub fn set_lights(&mut self, lights: &[GpuLight]) {
-        assert!(lights.len() <= MAX_LIGHTS, "{} lights", lights.len());
-        self.light_count = lights.len() as u32;
-        self.ctx
-            .queue
-            .write_buffer(&self.lights, 0, bytemuck::cast_slice(lights));
+    fn triangle_count(&self) -> u32 {
+        self.triangle_ranges.last().map_or(0, |r| r.end)
+    }
+
+    /// The objects' poses and materials.
+    pub fn set_objects(&mut self, objects: &[GpuObject]) -> Result<()> {
+        let ctx = Arc::clone(&self.ctx);
+        ctx.capture("deferred-shadow: object poses", || {
+            self.objects = upload(&ctx, "objects", objects, wgpu::BufferUsages::STORAGE);
+            Ok(())
+        })
+    }
+
+    /// At most [`MAX_LIGHTS`] (the shaders' uniform array).
+    pub fn set_lights(&mut self, lights: &[GpuLight]) -> Result<()> {
+        if lights.len() > MAX_LIGHTS {
+            return Err(Error::config(
+                "deferred-shadow",
+                format!("{} area lights, over {MAX_LIGHTS}", lights.len()),
+            ));
+        }
+        let mut array = [GpuLight::zeroed(); MAX_LIGHTS];
+        array[..lights.len()].copy_from_slice(lights);
+        let ctx = Arc::clone(&self.ctx);
+        ctx.capture("deferred-shadow: area lights", || {
+            self.lights = upload(&ctx, "lights", &array, wgpu::BufferUsages::UNIFORM);
+            self.light_count = lights.len() as u32;
+            Ok(())
+        })
     }
 
     /// Per vertex, the self-shadowed radiance L_s (rgb and a pad), then the
     /// weight v_s max(0, n·ω_i) of each light (eq. 8's T): `4 + lights`
     /// floats per vertex.
-    pub fn set_shading(&mut self, shading: &[f32]) {
-        self.shading.write(&self.ctx, shading);
+    pub fn set_shading(&mut self, shading: &[f32]) -> Result<()> {
+        let ctx = Arc::clone(&self.ctx);
+        ctx.capture("deferred-shadow: vertex shading", || {
+            self.shading = upload(&ctx, "vertex shading", shading, wgpu::BufferUsages::STORAGE);
+            Ok(())
+        })
     }
 
     /// Takes `plan` for the next [`Gpu::record_maps`]: uploads its windows
-    /// and ranges and lays its maps out in atlas batches. `groups[o]` is the
-    /// group of object o.
-    pub fn set_plan(&mut self, plan: &Plan, masks: &[u32], groups: &[u32], reuse: &[Option<u32>]) {
+    /// and ranges and lays its maps out in atlas batches. `masks` are the
+    /// plan's ([`Plan::masks`]), `groups[o]` is the group of object o and
+    /// `reuse[k]` the index in the previous plan of map k when it is kept.
+    /// Refuses a plan the device cannot hold ([`Gpu::check_plan`]) before
+    /// anything changes.
+    pub fn set_plan(
+        &mut self,
+        plan: &Plan,
+        masks: &[u32],
+        groups: &[u32],
+        reuse: &[Option<u32>],
+    ) -> Result<()> {
+        self.check_plan(plan)?;
+        let ctx = Arc::clone(&self.ctx);
+        ctx.capture("deferred-shadow: occlusion map plan", || {
+            self.lay_out(plan, masks, groups, reuse);
+            Ok(())
+        })
+    }
+
+    /// [`Gpu::set_plan`] once the plan is known to fit.
+    fn lay_out(&mut self, plan: &Plan, masks: &[u32], groups: &[u32], reuse: &[Option<u32>]) {
         let n = self.resolution;
         let limit = self
             .ctx
@@ -549,7 +724,6 @@ impl Gpu {
         let per_row = (limit / n).max(1);
         let capacity = (per_row * per_row).min(MAX_DISPATCH);
         let count = plan.maps.len() as u32;
-        self.map_count = count;
         let n2 = (n * n) as u64;
         // Kept maps are copied from the previous frame's array, runs of
         // consecutive maps in one copy each.
@@ -564,6 +738,7 @@ impl Gpu {
         if !self.copies.is_empty() {
             std::mem::swap(&mut self.blurred, &mut self.previous);
         }
+        self.map_count = count;
         self.blurred
             .reserve(&self.ctx, 4 * n2 * count.max(1) as u64);
         let drawn: Vec<u32> = (0..count)
@@ -600,13 +775,14 @@ impl Gpu {
             &self.ctx,
             4 * n2 * (drawn.len() as u32).clamp(1, capacity) as u64,
         );
-        self.maps.write(&self.ctx, &maps);
+        let storage_usage = wgpu::BufferUsages::STORAGE;
+        self.maps = upload(&self.ctx, "maps", &maps, storage_usage);
         let mut culling: Vec<u32> = plan.ranges.iter().flatten().copied().collect();
         self.masks_offset = culling.len() as u32;
         culling.extend_from_slice(masks);
-        self.culling.write(&self.ctx, &culling);
-        self.drawn.write(&self.ctx, &drawn);
-        self.instances.write(&self.ctx, &instances);
+        self.culling = upload(&self.ctx, "map ranges and masks", &culling, storage_usage);
+        self.drawn = upload(&self.ctx, "maps drawn", &drawn, storage_usage);
+        self.instances = upload(&self.ctx, "map instances", &instances, storage_usage);
         // The atlas: as many tiles as the largest batch needs, square.
         let largest = self.batches.iter().map(|b| b.count).max().unwrap_or(1);
         let tiles = (largest as f64).sqrt().ceil() as u32;
@@ -620,17 +796,42 @@ impl Gpu {
             );
             self.coverage = Some((side, texture.create_view(&Default::default())));
         }
-        if self.atlas_blocks.capacity() < self.batches.len() {
-            self.atlas_blocks = Slots::new(&self.ctx, "atlas", self.batches.len());
-        }
     }
 
     /// Renders and blurs every map of the plan.
-    pub fn record_maps(&self, encoder: &mut wgpu::CommandEncoder) {
+    pub fn record_maps(&self, encoder: &mut wgpu::CommandEncoder) -> Result<()> {
+        self.ctx.capture("deferred-shadow: occlusion maps", || {
+            self.record_maps_uncaptured(encoder);
+            Ok(())
+        })
+    }
+
+    fn record_maps_uncaptured(&self, encoder: &mut wgpu::CommandEncoder) {
         let Some((side, coverage)) = &self.coverage else {
             return;
         };
         let n = self.resolution;
+        // One uniform block per batch, bound at its dynamic offset.
+        let stride = u64::from(self.ctx.device.limits().min_uniform_buffer_offset_alignment)
+            .max(size_of::<AtlasBlock>() as u64) as usize;
+        let mut blocks = vec![0u8; stride * self.batches.len().max(1)];
+        for (block, batch) in blocks.chunks_exact_mut(stride).zip(&self.batches) {
+            let atlas = AtlasBlock {
+                resolution: n,
+                per_row: side / n,
+                side: *side as f32,
+                first: batch.first,
+            };
+            block[..size_of::<AtlasBlock>()].copy_from_slice(bytemuck::bytes_of(&atlas));
+        }
+        let atlas = upload(&self.ctx, "atlas", &blocks, wgpu::BufferUsages::UNIFORM);
+        let atlas_binding = || {
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &atlas,
+                offset: 0,
+                size: NonZeroU64::new(size_of::<AtlasBlock>() as u64),
+            })
+        };
         let cover_group = self
             .ctx
             .device
@@ -638,12 +839,12 @@ impl Gpu {
                 label: Some("cover"),
                 layout: &self.cover_layout,
                 entries: &[
-                    entry(0, self.atlas_blocks.binding()),
+                    entry(0, atlas_binding()),
                     entry(1, self.vertices.as_entire_binding()),
                     entry(3, self.objects.as_entire_binding()),
                     entry(4, self.lights.as_entire_binding()),
-                    entry(5, self.maps.buffer.as_entire_binding()),
-                    entry(6, self.instances.buffer.as_entire_binding()),
+                    entry(5, self.maps.as_entire_binding()),
+                    entry(6, self.instances.as_entire_binding()),
                 ],
             });
         let blur_group = self
@@ -653,12 +854,12 @@ impl Gpu {
                 label: Some("blur"),
                 layout: &self.blur_layout,
                 entries: &[
-                    entry(0, self.atlas_blocks.binding()),
-                    entry(5, self.maps.buffer.as_entire_binding()),
+                    entry(0, atlas_binding()),
+                    entry(5, self.maps.as_entire_binding()),
                     entry(7, wgpu::BindingResource::TextureView(coverage)),
                     entry(8, self.rows.buffer.as_entire_binding()),
                     entry(9, self.blurred.buffer.as_entire_binding()),
-                    entry(10, self.drawn.buffer.as_entire_binding()),
+                    entry(10, self.drawn.as_entire_binding()),
                 ],
             });
         let bytes = 4 * (n * n) as u64;
@@ -672,16 +873,7 @@ impl Gpu {
             );
         }
         for (b, batch) in self.batches.iter().enumerate() {
-            let offset = self.atlas_blocks.write(
-                &self.ctx,
-                b,
-                &AtlasBlock {
-                    resolution: n,
-                    per_row: side / n,
-                    side: *side as f32,
-                    first: batch.first,
-                },
-            );
+            let offset = (b * stride) as u32;
             {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("occluders onto maps"),
@@ -719,9 +911,10 @@ impl Gpu {
         }
     }
 
-    /// The deferred pass's bindings, with the current image targets (the
-    /// per-vertex pass binds them too, unused).
-    fn deferred_group(&self) -> wgpu::BindGroup {
+    /// The deferred pass's bindings, with `params` (this recording's) and
+    /// the current image targets (the per-vertex pass binds them too,
+    /// unused).
+    fn deferred_group(&self, params: &wgpu::Buffer) -> wgpu::BindGroup {
         let image = self.targets.image.create_view(&Default::default());
         self.ctx
             .device
@@ -729,15 +922,15 @@ impl Gpu {
                 label: Some("deferred"),
                 layout: &self.deferred_layout,
                 entries: &[
-                    entry(0, self.params.binding()),
+                    entry(0, params.as_entire_binding()),
                     entry(1, self.vertices.as_entire_binding()),
                     entry(2, self.triangles.as_entire_binding()),
                     entry(3, self.objects.as_entire_binding()),
                     entry(4, self.lights.as_entire_binding()),
-                    entry(5, self.maps.buffer.as_entire_binding()),
-                    entry(6, self.culling.buffer.as_entire_binding()),
+                    entry(5, self.maps.as_entire_binding()),
+                    entry(6, self.culling.as_entire_binding()),
                     entry(7, self.blurred.buffer.as_entire_binding()),
-                    entry(8, self.shading.buffer.as_entire_binding()),
+                    entry(8, self.shading.as_entire_binding()),
                     entry(9, wgpu::BindingResource::TextureView(&self.targets.surface)),
                     entry(10, wgpu::BindingResource::TextureView(&image)),
                     entry(11, self.vertex_radiance.as_entire_binding()),
@@ -745,8 +938,9 @@ impl Gpu {
             })
     }
 
-    fn params(&self, eye: Vec3, width: u32, height: u32) -> Params {
-        Params {
+    /// A recording's own parameters of the deferred pass.
+    fn params(&self, eye: Vec3, width: u32, height: u32) -> wgpu::Buffer {
+        let params = Params {
             eye: eye.extend(1.0),
             lights: self.light_count,
             resolution: self.resolution,
@@ -756,37 +950,68 @@ impl Gpu {
             height,
             stride: 4 + self.light_count,
             masks: self.masks_offset,
-        }
+        };
+        upload(
+            &self.ctx,
+            "deferred parameters",
+            &[params],
+            wgpu::BufferUsages::UNIFORM,
+        )
     }
 
     /// The radiance of every vertex toward `eye`, into
     /// [`Gpu::vertex_radiance`].
-    pub fn record_vertices(&self, encoder: &mut wgpu::CommandEncoder, eye: Vec3) {
-        let offset = self
-            .params
-            .write(&self.ctx, VERTEX_SLOT, &self.params(eye, 0, 0));
-        let group = self.deferred_group();
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("deferred pass, vertices"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.vertices_pipeline);
-        pass.set_bind_group(0, &group, &[offset]);
-        pass.dispatch_workgroups(self.vertex_count.div_ceil(64), 1, 1);
+    pub fn record_vertices(&self, encoder: &mut wgpu::CommandEncoder, eye: Vec3) -> Result<()> {
+        self.ctx
+            .capture("deferred-shadow: deferred pass, vertices", || {
+                let group = self.deferred_group(&self.params(eye, 0, 0));
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("deferred pass, vertices"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.vertices_pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(self.vertex_count.div_ceil(64), 1, 1);
+                Ok(())
+            })
     }
 
     /// The visible surface of `camera`'s image and the deferred pass over
-    /// it, into [`Gpu::image`].
-    pub fn record_image(&mut self, encoder: &mut wgpu::CommandEncoder, camera: &Camera, near: f32) {
+    /// it, into [`Gpu::image`]. Targets the device cannot make (an image
+    /// wider than its largest texture) are an error before anything is
+    /// recorded, and the previous targets are kept.
+    pub fn record_image(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        near: f32,
+    ) -> Result<()> {
         let (width, height) = (camera.width, camera.height);
         if (self.targets.width, self.targets.height) != (width, height) {
-            self.targets = Targets::new(&self.ctx, width, height);
+            self.targets = self.ctx.capture("deferred-shadow: image targets", || {
+                Ok(Targets::new(&self.ctx, width, height))
+            })?;
         }
-        let targets = &self.targets;
-        let clip = clip_from_world(camera, near);
         self.ctx
-            .queue
-            .write_buffer(&self.view, 0, bytemuck::bytes_of(&clip));
+            .capture("deferred-shadow: visible surface and deferred pass", || {
+                self.record_image_uncaptured(encoder, camera, near);
+                Ok(())
+            })
+    }
+
+    fn record_image_uncaptured(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        near: f32,
+    ) {
+        let targets = &self.targets;
+        let view = upload(
+            &self.ctx,
+            "view",
+            &[clip_from_world(camera, near)],
+            wgpu::BufferUsages::UNIFORM,
+        );
         let surface_group = self
             .ctx
             .device
@@ -794,7 +1019,7 @@ impl Gpu {
                 label: Some("visible surface"),
                 layout: &self.surface_layout,
                 entries: &[
-                    entry(0, self.view.as_entire_binding()),
+                    entry(0, view.as_entire_binding()),
                     entry(1, self.vertices.as_entire_binding()),
                     entry(2, self.triangles.as_entire_binding()),
                     entry(3, self.objects.as_entire_binding()),
@@ -826,24 +1051,16 @@ impl Gpu {
             });
             pass.set_pipeline(&self.surface);
             pass.set_bind_group(0, &surface_group, &[]);
-            pass.draw(
-                0..3 * self.triangle_ranges.last().map_or(0, |r| r.end),
-                0..1,
-            );
+            pass.draw(0..3 * self.triangle_count(), 0..1);
         }
-        let offset = self.params.write(
-            &self.ctx,
-            PIXEL_SLOT,
-            &self.params(camera.eye, width, height),
-        );
-        let group = self.deferred_group();
+        let group = self.deferred_group(&self.params(camera.eye, camera.width, camera.height));
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, pixels"),
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.pixels);
-        pass.set_bind_group(0, &group, &[offset]);
-        pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
     }
 
     /// Runs every pipeline once on stand-in data (one map of the first
@@ -863,16 +1080,15 @@ impl Gpu {
             }],
             ranges: vec![[0, 1]],
         };
-        let masks = vec![u32::MAX; self.triangle_ranges.last().map_or(0, |r| r.end) as usize];
-        self.set_plan(&plan, &masks, &[0], &[None]);
-        self.set_shading(&vec![0.0; 4 * self.vertex_count as usize]);
+        let masks = vec![u32::MAX; self.triangle_count() as usize];
+        self.set_plan(&plan, &masks, &[0], &[None])?;
+        self.set_shading(&vec![0.0; 4 * self.vertex_count as usize])?;
         let camera = Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 4, 4)?;
         let ctx = Arc::clone(&self.ctx);
         ctx.run("deferred-shadow: warm-up", |encoder| {
-            self.record_maps(encoder);
-            self.record_vertices(encoder, Vec3::Z);
-            self.record_image(encoder, &camera, 0.1);
-            Ok(())
+            self.record_maps(encoder)?;
+            self.record_vertices(encoder, Vec3::Z)?;
+            self.record_image(encoder, &camera, 0.1)
         })?;
         self.batches.clear();
         self.copies.clear();
@@ -914,8 +1130,51 @@ impl Targets {
             image: texture(
                 "image",
                 wgpu::TextureFormat::Rgba32Float,
-                wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
             ),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The chess scene at q = 256 and 256² maps needs about 4.8k maps,
+    /// 1.26 GB: more than the 128 MiB a storage binding of lavapipe (and
+    /// of WebGPU's defaults) holds. Refused naming the settings, the bytes
+    /// and the limit; its default settings (597 maps of 64²) fit. So do
+    /// masks until q × triangles words pass the limit.
+    #[test]
+    fn plans_beyond_a_storage_binding_are_refused_by_name() {
+        let limits = wgpu::Limits {
+            max_storage_buffer_binding_size: 128 << 20,
+            max_buffer_size: (1 << 31) - 1,
+            ..wgpu::Limits::default()
+        };
+        let refused = check_storage(256, 256, 4800, 2 * 256 * 3, 20_000, &limits);
+        let Err(Error::InvalidConfig { what, .. }) = refused else {
+            panic!("{refused:?}")
+        };
+        for named in [
+            "q = 256",
+            "256×256",
+            "4800 maps",
+            "1258291200 bytes",
+            "134217728 bytes",
+        ] {
+            assert!(what.contains(named), "{named:?} not in {what:?}");
+        }
+        check_storage(32, 64, 597, 2 * 32 * 3, 20_000, &limits).unwrap();
+        let masks = check_storage(256, 32, 10, 0, 150_000, &limits);
+        let Err(Error::InvalidConfig { what, .. }) = masks else {
+            panic!("{masks:?}")
+        };
+        assert!(
+            what.contains("q = 256") && what.contains("150000 triangles"),
+            "{what}"
+        );
     }
 }

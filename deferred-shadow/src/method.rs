@@ -249,6 +249,8 @@ impl DeferredShadow {
         let start = Instant::now();
         let bounds = world_bounds(&scene.parts, &posed.transforms);
         let plan = Plan::new(&lit.gpu, &bounds, &scene.groups, self.config.map_resolution);
+        // Refused before the masks are made, as before anything is allocated.
+        scene.gpu.check_plan(&plan)?;
         // Maps between groups that did not move since they were drawn are
         // kept.
         let reuse = match &posed.planned {
@@ -275,9 +277,14 @@ impl DeferredShadow {
             &scene.triangles,
             &scene.groups.of_object,
         );
-        scene
+        if let Err(e) = scene
             .gpu
-            .set_plan(&plan, &masks, &scene.groups.of_object, &reuse);
+            .set_plan(&plan, &masks, &scene.groups.of_object, &reuse)
+        {
+            // The maps on the GPU may be partly this plan's: keep none.
+            posed.planned = None;
+            return Err(e);
+        }
         self.profile
             .seconds(stage, "map planning (CPU)", start.elapsed().as_secs_f64());
         self.profile
@@ -295,7 +302,7 @@ impl DeferredShadow {
     /// [`Self::refresh`], then the maps recorded into `encoder` if needed.
     fn record_refresh(&mut self, stage: Stage, encoder: &mut wgpu::CommandEncoder) -> Result<()> {
         if self.refresh(stage)? {
-            self.prepared()?.gpu.record_maps(encoder);
+            self.prepared()?.gpu.record_maps(encoder)?;
         }
         Ok(())
     }
@@ -307,8 +314,7 @@ impl DeferredShadow {
             let ctx = Arc::clone(&self.ctx);
             let gpu = &self.prepared()?.gpu;
             ctx.run("deferred-shadow: occlusion maps", |encoder| {
-                gpu.record_maps(encoder);
-                Ok(())
+                gpu.record_maps(encoder)
             })?;
             self.profile
                 .seconds(stage, "occlusion maps (GPU)", start.elapsed().as_secs_f64());
@@ -332,7 +338,7 @@ impl DeferredShadow {
             start.elapsed().as_secs_f64(),
         );
         if let Some(scene) = &mut self.scene {
-            scene.gpu.set_lights(&gpu);
+            scene.gpu.set_lights(&gpu)?;
         }
         self.lit = Some(Lit {
             lights,
@@ -352,7 +358,7 @@ impl DeferredShadow {
     fn pose(&mut self, frame: &FrameGeometry) -> Result<()> {
         let scene = self
             .scene
-            .as_ref()
+            .as_mut()
             .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
         if frame.objects.len() != scene.parts.len() {
             return Err(Error::stage(
@@ -400,8 +406,7 @@ impl DeferredShadow {
             .zip(&scene.groups.of_object)
             .map(|((part, t), &g)| GpuObject::new(Mat4::from(*t), &part.material, g))
             .collect();
-        scene.gpu.set_objects(&objects);
-        Ok(())
+        scene.gpu.set_objects(&objects)
     }
 
     /// L_s toward `eye` at every vertex (eq. 2, 13) and the light weights,
@@ -457,7 +462,7 @@ impl DeferredShadow {
             dst[..3].copy_from_slice(&ls.to_array());
             dst[4..].copy_from_slice(w);
         }
-        scene.gpu.set_shading(&shading);
+        scene.gpu.set_shading(&shading)?;
         posed.uploaded = Some(eye);
         Ok(())
     }
@@ -635,55 +640,28 @@ impl ShadowMethod for DeferredShadow {
         let frame = scene.frame_geometry(0)?;
         let transforms: Vec<Affine3A> = Self::poses_of(&frame)?.into_iter().map(|p| p.0).collect();
         let groups = Groups::new(&self.config.grouping, &world_bounds(&parts, &transforms))?;
-        let mut geometry = Geometry {
-            vertices: Vec::new(),
-            triangles: Vec::new(),
-            triangle_ranges: Vec::new(),
-        };
-        for (o, part) in parts.iter().enumerate() {
-            let mesh = &part.mesh;
-            let base = part.first_vertex as u32;
-            geometry.vertices.extend(
-                mesh.positions()
-                    .iter()
-                    .zip(mesh.normals())
-                    .map(|(p, n)| [p.extend(o as f32), n.extend(0.0)]),
-            );
-            let first = geometry.triangles.len() as u32;
-            geometry.triangles.extend(
-                mesh.triangles()
-                    .iter()
-                    .map(|t| [t[0] + base, t[1] + base, t[2] + base, o as u32]),
-            );
-            geometry
-                .triangle_ranges
-                .push(first..geometry.triangles.len() as u32);
-        }
+        let geometry = Geometry::new(parts.iter().map(|p| &*p.mesh));
         let objects: Vec<GpuObject> = parts
             .iter()
             .zip(&transforms)
             .zip(&groups.of_object)
             .map(|((part, t), &g)| GpuObject::new(Mat4::from(*t), &part.material, g))
             .collect();
-        let ctx = Arc::clone(&self.ctx);
-        let gpu = ctx.capture("deferred-shadow: pipelines", || {
-            Ok(Gpu::new(
-                Arc::clone(&ctx),
-                &geometry,
-                &objects,
-                self.config.map_resolution,
-                self.config.self_visibility,
-            ))
-        })?;
+        let mut gpu = Gpu::new(
+            Arc::clone(&self.ctx),
+            &geometry,
+            &objects,
+            self.config.map_resolution,
+            self.config.self_visibility,
+        )?;
         self.profile.seconds(
             Stage::Prepare,
             "pipelines and buffers",
             start.elapsed().as_secs_f64(),
         );
-        let mut gpu = gpu;
         gpu.warm_up()?;
         if let Some(lit) = &self.lit {
-            gpu.set_lights(&lit.gpu);
+            gpu.set_lights(&lit.gpu)?;
         }
         self.scene = Some(Prepared {
             parts,
@@ -721,8 +699,7 @@ impl ShadowMethod for DeferredShadow {
         let ctx = Arc::clone(&self.ctx);
         let gpu = &self.prepared()?.gpu;
         ctx.run("deferred-shadow: shade", |encoder| {
-            gpu.record_vertices(encoder, eye);
-            Ok(())
+            gpu.record_vertices(encoder, eye)
         })?;
         let middle = Instant::now();
         let values: Vec<Vec4> = ctx.read_buffer(gpu.vertex_radiance(), 0, gpu.vertex_count())?;
@@ -764,8 +741,7 @@ impl ShadowMethod for DeferredShadow {
             .as_mut()
             .ok_or_else(|| Error::stage(NAME, "render before prepare"))?;
         ctx.run("deferred-shadow: render", |encoder| {
-            scene.gpu.record_image(encoder, camera, near);
-            Ok(())
+            scene.gpu.record_image(encoder, camera, near)
         })?;
         let middle = Instant::now();
         let texture = scene.gpu.image();
@@ -832,6 +808,10 @@ impl GpuStages for DeferredShadow {
         self.record_refresh(Stage::Update, encoder)
     }
 
+    /// The deferred pass at the vertices, into `encoder`. Each recording
+    /// reads its own eye and self-shadowed radiance, so several eyes can be
+    /// recorded into one encoder; the returned buffer is the same for all,
+    /// so copy it out before recording the next.
     fn record_shade(
         &mut self,
         eye: Vec3,
@@ -839,10 +819,15 @@ impl GpuStages for DeferredShadow {
     ) -> Result<&wgpu::Buffer> {
         self.upload_shading(eye)?;
         let gpu = &self.prepared()?.gpu;
-        gpu.record_vertices(encoder, eye);
+        gpu.record_vertices(encoder, eye)?;
         Ok(gpu.vertex_radiance())
     }
 
+    /// The visible surface and the deferred pass per pixel, into
+    /// `encoder`. Each recording reads its own camera, eye and
+    /// self-shadowed radiance, so several cameras can be recorded into one
+    /// encoder; cameras of one image size share the returned texture, so
+    /// sample or copy it before recording the next.
     fn record_render(
         &mut self,
         camera: &Camera,
@@ -854,7 +839,7 @@ impl GpuStages for DeferredShadow {
             .scene
             .as_mut()
             .ok_or_else(|| Error::stage(NAME, "render before prepare"))?;
-        scene.gpu.record_image(encoder, camera, near);
+        scene.gpu.record_image(encoder, camera, near)?;
         Ok(scene.gpu.image())
     }
 }

@@ -1,0 +1,250 @@
+//! The method against its device: GPU errors come back as the stage's
+//! error, plans larger than the device can hold are refused before anything
+//! is allocated, and recordings into one encoder each keep their own camera.
+
+use std::sync::Arc;
+
+use approx::assert_relative_eq;
+use deferred_shadow::{Config, DeferredShadow};
+use glam::{Vec3, Vec4};
+use shadow_core::{
+    Brdf, Camera, Environment, Error, Object, Scene, ShadowMethod,
+    gpu::{GpuContext, GpuStages, test_context},
+    shapes,
+};
+
+fn camera(eye: Vec3) -> Camera {
+    Camera::new(eye, Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 0.8, 48, 32).unwrap()
+}
+
+/// A ball of `material` over a floor of white Lambert.
+fn ball_on_floor(material: Brdf) -> Scene {
+    let ball = shapes::uv_sphere("ball", Vec3::new(0.0, 0.5, 0.0), 0.5, 12, 24).unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap();
+    let objects = vec![
+        Object {
+            mesh: Arc::new(ball),
+            material,
+        },
+        Object {
+            mesh: Arc::new(floor),
+            material: Brdf::lambert(Vec3::splat(0.8)).unwrap(),
+        },
+    ];
+    Scene::still("ball on a floor", objects, camera(Vec3::new(0.0, 2.0, 3.0))).unwrap()
+}
+
+/// A bright patch above the +X horizon over a dim sky.
+fn patchy() -> Environment {
+    let (w, h) = (64, 32);
+    let texels = (0..w * h)
+        .map(|i| {
+            let (row, col) = (i / w, i % w);
+            if (8..14).contains(&row) && (2..10).contains(&col) {
+                Vec3::new(20.0, 18.0, 15.0)
+            } else {
+                Vec3::new(0.3, 0.4, 0.6)
+            }
+        })
+        .collect();
+    Environment::new("patchy", w, h, texels).unwrap()
+}
+
+fn run(method: &mut DeferredShadow, scene: &Scene, env: &Environment) -> shadow_core::Result<()> {
+    method.prepare(scene)?;
+    method.relight(env)?;
+    method.update(&scene.frame_geometry(0)?, scene.camera())
+}
+
+/// A resource the device cannot make (the image of a camera one texel
+/// wider than the device's widest texture) is the stage's `Error::Gpu`,
+/// recorded or blocking, and the method renders again afterwards.
+#[test]
+fn an_image_too_wide_for_the_device_is_an_error_of_the_stage() {
+    let Some(ctx) = test_context() else { return };
+    let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
+    let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    run(&mut method, &scene, &patchy()).unwrap();
+    let wide = ctx.device.limits().max_texture_dimension_2d + 1;
+    let too_wide =
+        Camera::new(Vec3::new(0.0, 2.0, 3.0), Vec3::ZERO, Vec3::Y, 0.8, wide, 1).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let recorded = method.record_render(&too_wide, &mut encoder).map(drop);
+    assert!(matches!(recorded, Err(Error::Gpu(_))), "{recorded:?}");
+    drop(encoder);
+    let rendered = method.render(&too_wide).map(drop);
+    assert!(matches!(rendered, Err(Error::Gpu(_))), "{rendered:?}");
+    let image = method.render(scene.camera()).unwrap();
+    assert!(image.covered.iter().filter(|c| **c).count() > 100);
+}
+
+/// Waits for a future that wgpu's native backend resolves at once.
+fn block_on<F: Future>(future: F) -> F::Output {
+    let mut future = std::pin::pin!(future);
+    let mut context = std::task::Context::from_waker(std::task::Waker::noop());
+    loop {
+        if let std::task::Poll::Ready(value) = future.as_mut().poll(&mut context) {
+            return value;
+        }
+        std::thread::yield_now();
+    }
+}
+
+/// A host's device on the test adapter whose storage bindings hold at most
+/// `bytes`: wgpu's default handler panics on any error raised outside a
+/// capture there.
+fn small_device(bytes: u64) -> Option<Arc<GpuContext>> {
+    test_context()?;
+    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
+    descriptor.backends = wgpu::Backends::PRIMARY;
+    let instance = wgpu::Instance::new(descriptor.with_env());
+    let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+        .expect("the adapter test_context found");
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: bytes,
+        ..wgpu::Limits::default().or_worse_values_from(&adapter.limits())
+    };
+    let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("a device with lower limits");
+    Some(Arc::new(GpuContext::from_device(device, queue)))
+}
+
+/// More map storage than the device binds is refused as a configuration
+/// error that names the settings, the bytes needed and the limit, before
+/// anything is allocated; settings that fit run on the same device.
+#[test]
+fn maps_beyond_the_device_limit_are_refused_by_name() {
+    let limit = 1 << 20;
+    let Some(ctx) = small_device(limit) else {
+        return;
+    };
+    let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
+    // 32 lights and 128² maps (64 KiB each): more than the 16 maps 1 MiB
+    // holds on this scene.
+    let config = Config {
+        lights: 32,
+        map_resolution: 128,
+        ..Config::default()
+    };
+    let mut method = DeferredShadow::new(Arc::clone(&ctx), config).unwrap();
+    let refused = run(&mut method, &scene, &patchy());
+    let Err(Error::InvalidConfig { what, .. }) = refused else {
+        panic!("{refused:?}")
+    };
+    for named in ["q = 32", "128×128", &format!("{limit} bytes")] {
+        assert!(what.contains(named), "{named:?} not in {what:?}");
+    }
+    let fits = Config {
+        lights: 32,
+        map_resolution: 16,
+        ..Config::default()
+    };
+    let mut method = DeferredShadow::new(ctx, fits).unwrap();
+    run(&mut method, &scene, &patchy()).unwrap();
+    assert!(method.map_count().unwrap() > 16);
+    let image = method.render(scene.camera()).unwrap();
+    assert!(image.covered.iter().filter(|c| **c).count() > 100);
+}
+
+/// Two cameras recorded into one encoder, each image copied out before the
+/// next recording, give each camera's own image: what a recording alone
+/// gives. The ball is glossy, so its self-shadowed radiance depends on the
+/// eye too; the same holds for two eyes' vertex radiance.
+#[test]
+fn two_cameras_recorded_into_one_encoder_each_get_their_own_image() {
+    let Some(ctx) = test_context() else { return };
+    let glossy = Brdf::phong(Vec3::splat(0.3), Vec3::splat(0.5), 20.0).unwrap();
+    let scene = ball_on_floor(glossy);
+    let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    run(&mut method, &scene, &patchy()).unwrap();
+    let cameras = [
+        camera(Vec3::new(0.0, 2.0, 3.0)),
+        camera(Vec3::new(3.0, 1.0, -1.0)),
+    ];
+
+    let mut alone = Vec::new();
+    for camera in &cameras {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let texture = method.record_render(camera, &mut encoder).unwrap().clone();
+        ctx.submit_and_wait([encoder.finish()]).unwrap();
+        alone.push(ctx.read_texture::<[f32; 4]>(&texture).unwrap());
+    }
+    let mut eyes_alone = Vec::new();
+    for camera in &cameras {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let buffer = method
+            .record_shade(camera.eye, &mut encoder)
+            .unwrap()
+            .clone();
+        ctx.submit_and_wait([encoder.finish()]).unwrap();
+        let count = (buffer.size() / 16) as usize;
+        eyes_alone.push(ctx.read_buffer::<Vec4>(&buffer, 0, count).unwrap());
+    }
+
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let mut images = Vec::new();
+    let mut radiances = Vec::new();
+    for camera in &cameras {
+        let texture = method.record_render(camera, &mut encoder).unwrap().clone();
+        assert!(
+            texture
+                .usage()
+                .contains(wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC)
+        );
+        let copy = ctx.create_texture_2d(
+            "the caller's copy",
+            (camera.width, camera.height),
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+        );
+        encoder.copy_texture_to_texture(
+            texture.as_image_copy(),
+            copy.as_image_copy(),
+            texture.size(),
+        );
+        images.push(copy);
+        let buffer = method
+            .record_shade(camera.eye, &mut encoder)
+            .unwrap()
+            .clone();
+        let copy = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("the caller's copy"),
+            size: buffer.size(),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        encoder.copy_buffer_to_buffer(&buffer, 0, &copy, 0, buffer.size());
+        radiances.push(copy);
+    }
+    ctx.submit_and_wait([encoder.finish()]).unwrap();
+
+    for (image, expected) in images.iter().zip(&alone) {
+        let texels: Vec<[f32; 4]> = ctx.read_texture(image).unwrap();
+        for (t, e) in texels.iter().zip(expected) {
+            assert_relative_eq!(Vec4::from(*t), Vec4::from(*e), epsilon = 1e-6);
+        }
+    }
+    let differ = alone[0]
+        .iter()
+        .zip(&alone[1])
+        .filter(|(a, b)| (Vec4::from(**a) - Vec4::from(**b)).abs().max_element() > 1e-3)
+        .count();
+    assert!(differ > alone[0].len() / 4, "{differ} pixels differ");
+    for (radiance, expected) in radiances.iter().zip(&eyes_alone) {
+        let values: Vec<Vec4> = ctx.read_buffer(radiance, 0, expected.len()).unwrap();
+        for (v, e) in values.iter().zip(expected) {
+            assert_relative_eq!(*v, *e, epsilon = 1e-6);
+        }
+    }
+    let ball = scene.objects()[0].mesh.vertex_count();
+    let moved = (0..ball)
+        .filter(|&v| (eyes_alone[0][v] - eyes_alone[1][v]).abs().max_element() > 1e-3)
+        .count();
+    assert!(
+        moved > ball / 4,
+        "{moved} of {ball} ball vertices change with the eye"
+    );
+}
