@@ -1252,11 +1252,11 @@ mod tests {
         }
     }
 
-    /// The chess scene at q = 256 and 256² maps needs about 4.8k maps,
-    /// 1.26 GB: more than the 128 MiB a storage binding of lavapipe (and
-    /// of WebGPU's defaults) holds. Refused naming the settings, the bytes
-    /// and the limit; its default settings (597 maps of 64²) fit. So do
-    /// masks until q × triangles words pass the limit.
+    /// 4,800 maps of 256² at q = 256, 1.26 GB: more than the 128 MiB a
+    /// storage binding of lavapipe (and of WebGPU's defaults) holds.
+    /// Refused naming the settings, the bytes and the limit; 597 maps of
+    /// 64² at q = 32 fit. So do masks until q × triangles words pass the
+    /// limit.
     #[test]
     fn plans_beyond_a_storage_binding_are_refused_by_name() {
         let limits = wgpu::Limits {
