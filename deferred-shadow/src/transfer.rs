@@ -406,7 +406,7 @@ mod tests {
             }
         }
         println!("largest relative error {worst}");
-        // Measured: 2.4e-7 (t_00 = π y_00 exactly: every ray is unoccluded).
+        // Measured: 2.6e-7 (t_00 = π y_00 exactly: every ray is unoccluded).
         assert!(worst < 1e-5, "{worst}");
     }
 
