@@ -5,7 +5,7 @@
 
 use std::num::NonZeroU32;
 
-use shadow_core::sh::ShOrder;
+use shadow_core::sh::{ShOrder, Window};
 use shadow_core::{Error, Result};
 
 /// Pixels per side of the visibility mask (one machine word per row).
@@ -211,6 +211,10 @@ pub struct Config {
     pub lut_resolution: usize,
     /// SH order of the transfer vectors and lighting.
     pub order: ShOrder,
+    /// σ-factors applied to the lighting's bands against the ringing of a
+    /// small bright source (shadow-core's [`Window`]); direct integration,
+    /// which has no SH, ignores it.
+    pub window: Window,
     pub integration: Integration,
     pub backface_culling: BackfaceCulling,
     pub hierarchy: Hierarchy,
@@ -226,6 +230,7 @@ impl Default for Config {
             mask_resolution: MaskResolution::R32,
             lut_resolution: 128,
             order: ShOrder::new(5).expect("5 is a valid order"),
+            window: Window::None,
             integration: Integration::ShPixels,
             backface_culling: BackfaceCulling::Auto,
             hierarchy: Hierarchy::default(),

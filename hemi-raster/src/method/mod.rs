@@ -303,6 +303,9 @@ fn name_of(config: &Config) -> String {
         Integration::ShBlocks => "-blocks",
         Integration::Direct => "-direct",
     });
+    if config.window != default.window && config.integration != Integration::Direct {
+        name.push_str(&format!("-{}", config.window.name()));
+    }
     name.push_str(match config.backface_culling {
         BackfaceCulling::Auto => "",
         BackfaceCulling::On => "-cull-all",
@@ -424,7 +427,8 @@ impl ShadowMethod for HemiRaster {
     fn relight(&mut self, environment: &Environment) -> Result<()> {
         self.lighting = Some(match self.config.integration {
             Integration::ShBlocks | Integration::ShPixels => {
-                Lighting::Sh(sh::project_environment(environment, self.config.order))
+                let light = sh::project_environment(environment, self.config.order);
+                Lighting::Sh(self.config.window.apply(&light))
             }
             Integration::Direct => {
                 let sigma = match self.config.mask_resolution {

@@ -48,6 +48,8 @@
 //!   [`EulerShRotation`] (applied without a matrix, for per-vertex frames),
 //! - convolution with zonal kernels: [`Zonal`] (Lambert's clamped cosine and
 //!   the normalized Phong lobe, by the Funk–Hecke theorem),
+//! - windowing: [`Window`] (Hanning and Lanczos σ-factors against the
+//!   ringing of truncated expansions of small bright sources),
 //! - [`ShRgb`], an RGB coefficient vector: lighting, evaluated, dotted with a
 //!   transfer vector (Kautz et al. eq. 2), rotated and convolved.
 
@@ -58,6 +60,7 @@ mod rgb;
 mod rotation;
 #[cfg(test)]
 mod test_util;
+mod window;
 mod zonal;
 
 use std::fmt;
@@ -66,6 +69,7 @@ pub use basis::{eval_basis, eval_basis_lanes};
 pub use projection::{project_environment, project_fn, project_fn_rgb};
 pub use rgb::ShRgb;
 pub use rotation::{CHUNK, Chunk, EulerShRotation, ShRotation};
+pub use window::Window;
 pub use zonal::Zonal;
 
 /// A validated SH order: the number of bands n, 1 ≤ n ≤ [`ShOrder::MAX`],

@@ -76,6 +76,13 @@ impl Zonal {
         Some(Zonal::clamped_cosine_power(order, s, (s + 2.0) / TAU))
     }
 
+    /// The kernel whose Funk–Hecke eigenvalues are `eigenvalues`, one per
+    /// band of `order` (as a [`Window`](super::Window) gives them).
+    pub(super) fn from_eigenvalues(order: ShOrder, eigenvalues: Vec<f32>) -> Zonal {
+        debug_assert_eq!(eigenvalues.len(), order.bands());
+        Zonal { order, eigenvalues }
+    }
+
     /// scale · max(0, t)^s: Λ_l = 2π · scale · I_l(s) (module docs).
     fn clamped_cosine_power(order: ShOrder, s: f64, scale: f64) -> Zonal {
         let bands = order.bands();
