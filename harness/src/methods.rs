@@ -70,7 +70,7 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "hemi-raster:mask=N",
-        "hemi-raster with N×N masks (16, 32 or 64); more options: table=N (plane-table cells per cube-face side, even), order=N (SH order), reach=N (the hierarchy's near reach, in mean coarse-triangle radii), min=N (its least coarse triangle count), pvs=N (sets from every Nth frame), paper (SH from 4×4 blocks, as published), direct (no SH), combined with flat or pvs (e.g. hemi-raster:pvs:mask=16:order=3)",
+        "hemi-raster with N×N masks (16, 32 or 64); more options: table=N (plane-table cells per cube-face side, even), order=N (SH order), reach=N (the hierarchy's near reach, in mean coarse-triangle radii), min=N (its least coarse triangle count), pvs=N (sets from every Nth frame), paper (SH from 4×4 blocks, as published), direct (no SH), window=none|hanning|lanczos (σ-factors on the lighting's SH bands), combined with flat or pvs (e.g. hemi-raster:pvs:mask=16:order=3)",
     ),
     (
         "occlusion-query",
@@ -82,11 +82,11 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "occlusion-query:paper",
-        "the paper as published: queries, equal weights, the raw quadrature",
+        "the paper as published: queries, equal weights, the raw quadrature, glPolygonOffset(1, 1), the lightsphere on the axes; other options change it (occlusion-query:paper:k=66)",
     ),
     (
         "occlusion-query:k=N",
-        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), simplified (occluders simplified while their surface moves by at most a texel of the depth maps; simplified=TEXELS for another bound)",
+        "N lightsphere directions (6, 18, 66, 258, 1026 or 4098); more options: map=N (depth map side), filter (vertex filtering, §4.1), axes (the octahedron on the coordinate axes, as in the paper), blur=F (the environment's prefilter width in lightsphere spacings), simplified (occluders simplified while their surface moves by at most a texel of the depth maps; simplified=TEXELS for another bound)",
     ),
     (
         "deferred-shadow",
@@ -173,18 +173,27 @@ fn whole(name: &str, option: &str, value: &str) -> Result<u32> {
         .map_err(|_| Error::config(name, format!("{option}: not a whole number")))
 }
 
-/// The configuration the options of `occlusion-query` in `name` give.
+/// The configuration the options of `occlusion-query` in `name` give. The
+/// preset `paper` ([`occlusion_query::Config::paper`]) is the base the other
+/// options change, wherever it stands among them; `axes` puts the
+/// lightsphere on the coordinate axes (the paper's orientation), `blur=F`
+/// sets the environment's prefilter width in lightsphere spacings.
 fn occlusion_query_config(name: &str) -> Result<occlusion_query::Config> {
-    let mut config = occlusion_query::Config::default();
+    use occlusion_query::{Config, Orientation};
     let bad = |what: String| Err(Error::config(name, what));
+    let paper = options(name, "occlusion-query")?.any(|option| option == "paper");
+    let mut config = if paper {
+        Config::paper()
+    } else {
+        Config::default()
+    };
     for option in options(name, "occlusion-query")? {
         match option.split_once('=') {
+            None if option == "paper" => {}
             None if option == "queries" => config.test = VertexTest::OcclusionQuery,
-            None if option == "paper" => config = occlusion_query::Config::paper(),
-            None if option == "filter" => config.filtering = Some(Filtering { threshold: 0.05 }),
-            None if option == "simplified" => {
-                config.occluder = occlusion_query::Config::fast().occluder
-            }
+            None if option == "filter" => config.filtering = Some(Filtering::default()),
+            None if option == "simplified" => config.occluder = Config::fast().occluder,
+            None if option == "axes" => config.orientation = Orientation::Axes,
             Some(("k", k)) => match k.parse().ok().and_then(Level::with_directions) {
                 Some(level) => config.level = level,
                 None => {
@@ -197,14 +206,19 @@ fn occlusion_query_config(name: &str) -> Result<occlusion_query::Config> {
                 Ok(texels) => config.occluder = Occluder::Simplified { texels },
                 Err(_) => return bad(format!("simplified={t}: not a number")),
             },
+            Some(("blur", b)) => match b.parse() {
+                Ok(width) => config.prefilter = width,
+                Err(_) => return bad(format!("blur={b}: not a number")),
+            },
             Some(("map", n)) => config.map_resolution = whole(name, option, n)?,
             _ => {
                 return bad(format!(
-                    "unknown option {option:?}; options are queries, paper, filter, simplified, simplified=TEXELS, k=N, map=N"
+                    "unknown option {option:?}; options are queries, paper, filter, axes, simplified, simplified=TEXELS, k=N, map=N, blur=F"
                 ));
             }
         }
     }
+    config.check()?;
     Ok(config)
 }
 
@@ -239,6 +253,10 @@ pub fn hemi_raster_config(name: &str) -> Result<hemi_raster::Config> {
             }
             None if option == "paper" => config.integration = Integration::ShBlocks,
             None if option == "direct" => config.integration = Integration::Direct,
+            Some(("window", w)) => match shadow_core::sh::Window::from_name(w) {
+                Some(window) => config.window = window,
+                None => return bad(format!("window={w}: windows are none, hanning, lanczos")),
+            },
             Some(("mask", n)) => {
                 config.mask_resolution = match number(n)? {
                     16 => MaskResolution::R16,
@@ -264,7 +282,7 @@ pub fn hemi_raster_config(name: &str) -> Result<hemi_raster::Config> {
             },
             _ => {
                 return bad(format!(
-                    "unknown option {option:?}; options are flat, pvs, pvs=N, paper, direct, mask=N, table=N, order=N, reach=N, min=N"
+                    "unknown option {option:?}; options are flat, pvs, pvs=N, paper, direct, mask=N, table=N, order=N, reach=N, min=N, window=none|hanning|lanczos"
                 ));
             }
         }
@@ -320,6 +338,26 @@ mod tests {
                 .with_near_reach(Hierarchy::WIDE_NEAR_REACH)
         );
         assert!(hemi_raster_config("occlusion-query").is_err());
+    }
+
+    /// The preset `paper` is the base whatever its place among the options.
+    #[test]
+    fn occlusion_query_options_compose_in_any_order() {
+        for name in ["occlusion-query:k=66:paper", "occlusion-query:paper:k=66"] {
+            let config = occlusion_query_config(name).unwrap();
+            let expected = occlusion_query::Config {
+                level: Level::with_directions(66).unwrap(),
+                ..occlusion_query::Config::paper()
+            };
+            assert_eq!(config, expected, "{name}");
+        }
+        let axes = occlusion_query_config("occlusion-query:blur=0.3:axes").unwrap();
+        assert_eq!(axes.orientation, occlusion_query::Orientation::Axes);
+        assert_eq!(axes.prefilter, 0.3);
+        for bad in ["occlusion-query:blur=-1", "occlusion-query:blur=x"] {
+            let err = occlusion_query_config(bad).unwrap_err();
+            assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");
+        }
     }
 
     #[test]

@@ -167,30 +167,33 @@ fn stress_scene() -> Scene {
     Scene::still("stress", objects, camera).unwrap()
 }
 
-/// The offsets the sweep tries: (occluder slope, its clamp, receiver slope,
-/// toward light, along normal), in texels.
-const OFFSETS: [(f32, f32, f32, f32, f32); 16] = [
-    (0.0, 0.0, 0.0, 0.0, 0.0),
-    (1.0, 0.0, 0.0, 1.0, 0.0),
-    (1.0, 0.0, 0.0, 0.0, 0.0),
-    (1.0, 1.0, 0.0, 0.0, 0.0),
-    (1.0, 2.0, 0.0, 0.0, 0.0),
-    (1.0, 4.0, 0.0, 0.0, 0.0),
-    (2.0, 2.0, 0.0, 0.0, 0.0),
-    (1.0, 2.0, 0.0, 0.0, 0.25),
-    (0.0, 0.0, 0.0, 1.0, 0.0),
-    (0.0, 0.0, 0.75, 0.0, 0.0),
-    (0.0, 0.0, 1.0, 0.0, 0.0),
-    (0.0, 0.0, 1.5, 0.0, 0.0),
-    (0.0, 0.0, 0.5, 0.0, 0.25),
-    (0.0, 0.0, 0.0, 0.0, 0.5),
-    (0.0, 0.0, 0.0, 0.0, 0.75),
-    (0.0, 0.0, 0.0, 0.0, 1.0),
+/// The offsets the sweep tries: (occluder slope, units, its clamp, receiver
+/// slope, toward light, along normal), in texels but for the units (steps
+/// of the depth buffer).
+const OFFSETS: [(f32, u32, f32, f32, f32, f32); 17] = [
+    (0.0, 0, 0.0, 0.0, 0.0, 0.0),
+    (1.0, 1, 0.0, 0.0, 0.0, 0.0),
+    (1.0, 0, 0.0, 0.0, 1.0, 0.0),
+    (1.0, 0, 0.0, 0.0, 0.0, 0.0),
+    (1.0, 0, 1.0, 0.0, 0.0, 0.0),
+    (1.0, 0, 2.0, 0.0, 0.0, 0.0),
+    (1.0, 0, 4.0, 0.0, 0.0, 0.0),
+    (2.0, 0, 2.0, 0.0, 0.0, 0.0),
+    (1.0, 0, 2.0, 0.0, 0.0, 0.25),
+    (0.0, 0, 0.0, 0.0, 1.0, 0.0),
+    (0.0, 0, 0.0, 0.75, 0.0, 0.0),
+    (0.0, 0, 0.0, 1.0, 0.0, 0.0),
+    (0.0, 0, 0.0, 1.5, 0.0, 0.0),
+    (0.0, 0, 0.0, 0.5, 0.0, 0.25),
+    (0.0, 0, 0.0, 0.0, 0.0, 0.5),
+    (0.0, 0, 0.0, 0.0, 0.0, 0.75),
+    (0.0, 0, 0.0, 0.0, 0.0, 1.0),
 ];
 
 fn offset(
-    (occluder_slope, occluder_clamp, receiver_slope, toward_light, along_normal): (
+    (occluder_slope, occluder_units, occluder_clamp, receiver_slope, toward_light, along_normal): (
         f32,
+        u32,
         f32,
         f32,
         f32,
@@ -199,6 +202,7 @@ fn offset(
 ) -> DepthOffset {
     DepthOffset {
         occluder_slope,
+        occluder_units,
         occluder_clamp,
         receiver_slope,
         toward_light,
@@ -207,8 +211,8 @@ fn offset(
 }
 
 /// The acne / light-leak trade-off: no offset lets surfaces shadow
-/// themselves (acne), the paper's lets vertices close under a thin occluder
-/// see through it, and too coarse a map blurs contact. The default offset
+/// themselves (acne), the paper's polygon offset lets vertices close under
+/// a thin occluder see through it, and too coarse a map blurs contact. The default offset
 /// and resolution sit at the smallest error of the sweep.
 #[test]
 fn default_offset_and_resolution_sit_at_the_error_minimum() {
@@ -229,11 +233,14 @@ fn default_offset_and_resolution_sit_at_the_error_minimum() {
             rows.push((map, config.offset, error.relative_l2, error.p99));
         }
     }
-    println!("map  occluder slope  clamp  receiver slope  toward light  along normal  error   p99");
+    println!(
+        "map  occluder slope  units  clamp  receiver slope  toward light  along normal  error   p99"
+    );
     for (map, o, l2, p99) in &rows {
         println!(
-            "{map:>4}  {:>14}  {:>5}  {:>14}  {:>12}  {:>12}  {:>5.2}%  {:>6.1}%",
+            "{map:>4}  {:>14}  {:>5}  {:>5}  {:>14}  {:>12}  {:>12}  {:>5.2}%  {:>6.1}%",
             o.occluder_slope,
+            o.occluder_units,
             o.occluder_clamp,
             o.receiver_slope,
             o.toward_light,
@@ -242,22 +249,29 @@ fn default_offset_and_resolution_sit_at_the_error_minimum() {
             p99 * 100.0
         );
     }
-    let error_at = |map: u32, offset: DepthOffset| {
-        rows.iter().find(|r| (r.0, r.1) == (map, offset)).unwrap().2
+    let at = |map: u32, offset: DepthOffset| {
+        let row = rows.iter().find(|r| (r.0, r.1) == (map, offset)).unwrap();
+        (row.2, row.3)
     };
     let best = rows.iter().map(|r| r.2).fold(f32::INFINITY, f32::min);
-    let default = error_at(defaults.map_resolution, defaults.offset);
+    let (default, default_p99) = at(defaults.map_resolution, defaults.offset);
     assert!(
         default <= best * 1.05,
         "default {:.3}% against the sweep's best {:.3}%",
         default * 100.0,
         best * 100.0
     );
-    // Both failure modes show: no offset at all (acne), and the paper's
-    // offset (leaks under the slab) are clearly worse.
+    // Both failure modes show at 512² maps: no offset at all (acne: measured
+    // 46% against the default's 1.1%), and the paper's glPolygonOffset(1, 1),
+    // whose slope term lets vertices close under the slab see through it
+    // (measured 2.6%, p99 1379% against the default's 29%).
     let map = defaults.map_resolution;
-    let none = error_at(map, DepthOffset::NONE);
-    assert!(none > 2.0 * default, "no offset: {none}");
-    let paper = error_at(map, DepthOffset::PAPER);
-    assert!(paper > 2.0 * default, "the paper's offset: {paper}");
+    let (none, _) = at(map, DepthOffset::NONE);
+    assert!(none > 10.0 * default, "no offset: {none}");
+    let (paper, paper_p99) = at(map, DepthOffset::PAPER);
+    assert!(paper > 1.5 * default, "the paper's offset: {paper}");
+    assert!(
+        paper_p99 > 10.0 * default_p99,
+        "the paper's offset: p99 {paper_p99}"
+    );
 }

@@ -2,7 +2,9 @@
 
 use shadow_core::{Error, Result};
 
-use crate::lightsphere::{Level, Weights};
+const NAME: &str = "occlusion-query";
+
+use crate::lightsphere::{Level, Orientation, Weights};
 
 /// How each vertex is tested against a direction's depth map (§3.1–3.2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -39,28 +41,37 @@ pub enum Normalization {
 /// Without one, a vertex is hidden by its own surface (acne): a map texel
 /// holds the depth at its centre, up to half a diagonal from the vertex
 /// along the surface, which is 0.71 texel × tan θ deeper or shallower along
-/// the light (θ between the surface normal and the light). WebGPU has no
-/// depth bias for point lists, and a float depth buffer's "units" are not a
-/// fixed step, so the offset is built from four terms, all in texels of the
-/// depth map:
+/// the light (θ between the surface normal and the light). The offset has
+/// the polygon offset's terms on the occluders' side, as WebGPU's depth bias
+/// gives them, and moves of the tested vertices, which WebGPU has no bias
+/// for (point lists get none):
 ///
-/// * `occluder_slope`, the polygon offset's factor: the depth-map
-///   pipeline's slope-scaled bias, by the *occluder's* slope, at most
-///   `occluder_clamp` texels (0: unbounded, as in OpenGL). An occluder
-///   seen edge-on gets a large bias, so without a bound a vertex close
-///   under it sees through it.
+/// * `occluder_slope`, the polygon offset's *factor*: the occluders' depth
+///   moves away from the light by this many times their depth slope (depth
+///   per texel of the map), at most `occluder_clamp` texels of depth (0:
+///   unbounded, as in OpenGL). An occluder seen edge-on gets a large bias,
+///   so without a bound a vertex close under it sees through it.
+/// * `occluder_units`, the polygon offset's *units*: the occluders' depth
+///   moves by this many steps of the depth buffer's resolution. The maps are
+///   32-bit float, whose step is 2^(e − 23) for a triangle whose largest
+///   depth has exponent e (Vulkan's rule): 6·10⁻⁸ to 1.2·10⁻⁷ of the depth
+///   range over its far half, about the step of the paper's 24-bit buffer
+///   (6·10⁻⁸). A unit is millionths of a texel: it matters only where the
+///   slope term is zero.
 /// * `receiver_slope`: the tested vertex moves toward the light by this many
 ///   texels times its own tan θ (tan θ at most [`DepthOffset::MAX_TAN`]):
 ///   the factor, from the receiver's side, which is the surface that causes
 ///   the acne.
-/// * `toward_light`, the polygon offset's units: a constant move toward
-///   the light.
+/// * `toward_light`: a constant move of the tested vertex toward the light,
+///   in texels.
 /// * `along_normal`: a move off the vertex's own surface along its normal,
-///   which keeps it out of that surface at 0.71 texel whatever the angle,
-///   but lifts it through any surface closer than that (a contact).
+///   in texels, which keeps it out of that surface at 0.71 texel whatever
+///   the angle, but lifts it through any surface closer than that (a
+///   contact).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DepthOffset {
     pub occluder_slope: f32,
+    pub occluder_units: u32,
     pub occluder_clamp: f32,
     pub receiver_slope: f32,
     pub toward_light: f32,
@@ -68,26 +79,39 @@ pub struct DepthOffset {
 }
 
 impl DepthOffset {
-    /// The paper's `glPolygonOffset(1, 1)`, as close as WebGPU allows.
+    /// The paper's `glPolygonOffset(1, 1)`: one depth slope and one step of
+    /// the depth buffer, on the occluders.
     pub const PAPER: DepthOffset = DepthOffset {
         occluder_slope: 1.0,
-        occluder_clamp: 0.0,
-        receiver_slope: 0.0,
-        toward_light: 1.0,
-        along_normal: 0.0,
+        occluder_units: 1,
+        ..DepthOffset::NONE
     };
 
     /// No offset at all.
     pub const NONE: DepthOffset = DepthOffset {
         occluder_slope: 0.0,
+        occluder_units: 0,
         occluder_clamp: 0.0,
         receiver_slope: 0.0,
         toward_light: 0.0,
         along_normal: 0.0,
     };
 
+    /// Half a texel along the vertex normal: the least error of a sweep of
+    /// offsets and map sizes on a ball resting on a floor under a thin slab.
+    pub const DEFAULT: DepthOffset = DepthOffset {
+        along_normal: 0.5,
+        ..DepthOffset::NONE
+    };
+
     /// The largest tan θ `receiver_slope` is multiplied by (θ ≈ 83°).
     pub const MAX_TAN: f32 = 8.0;
+}
+
+impl Default for DepthOffset {
+    fn default() -> DepthOffset {
+        DepthOffset::DEFAULT
+    }
 }
 
 /// Vertex filtering by temporal coherence (§4.1): only vertices of
@@ -98,6 +122,13 @@ pub struct Filtering {
     /// remaining one is evaluated and filtering stops (the paper's
     /// threshold below which it no longer pays).
     pub threshold: f32,
+}
+
+impl Default for Filtering {
+    /// Filtering stops once fewer than 5% of the triangles remain unseen.
+    fn default() -> Filtering {
+        Filtering { threshold: 0.05 }
+    }
 }
 
 /// What is drawn into the depth maps.
@@ -119,6 +150,8 @@ pub struct Config {
     /// The lightsphere level while the geometry changes: 258 directions by
     /// default, the paper's "reasonable" level 3 (§4.2).
     pub level: Level,
+    /// How the lightsphere's directions sit in world space.
+    pub orientation: Orientation,
     /// While the geometry stays, refine one level per update up to this one,
     /// reusing every coarser direction's result (§4.2); `None` keeps `level`.
     pub idle_level: Option<Level>,
@@ -138,20 +171,20 @@ pub struct Config {
 }
 
 impl Default for Config {
-    /// Depth compare on the GPU at 258 directions with Voronoi weights and
-    /// per-vertex normalization, full occluders, 256² maps, no filtering.
+    /// Depth compare on the GPU at 258 directions, turned off the
+    /// coordinate planes, with Voronoi weights and per-vertex normalization,
+    /// full occluders, 512² maps offset by half a texel along the normal, no
+    /// filtering.
     fn default() -> Config {
         Config {
             level: Level::new(3).expect("level 3"),
+            orientation: Orientation::default(),
             idle_level: None,
             weights: Weights::Voronoi,
             normalization: Normalization::PerVertex,
             test: VertexTest::DepthCompare,
             map_resolution: 512,
-            offset: DepthOffset {
-                along_normal: 0.5,
-                ..DepthOffset::NONE
-            },
+            offset: DepthOffset::DEFAULT,
             filtering: None,
             occluder: Occluder::Full,
             // 1/√(2π)
@@ -163,9 +196,10 @@ impl Default for Config {
 impl Config {
     /// The paper's method as published: occlusion queries, equal weights,
     /// the raw quadrature, offset (1, 1) ([`DepthOffset::PAPER`]), 258
-    /// directions.
+    /// directions from an octahedron on the axes.
     pub fn paper() -> Config {
         Config {
+            orientation: Orientation::Axes,
             weights: Weights::Equal,
             normalization: Normalization::Off,
             test: VertexTest::OcclusionQuery,
@@ -185,6 +219,57 @@ impl Config {
         }
     }
 
+    /// The method's name, which says every setting that changes the
+    /// result, so that a report says which it shows and no two settings
+    /// share an image file: the level, then each setting that differs from
+    /// the default, e.g. `occlusion-query-k66-queries-equal-weights-raw-axes-offset-f1-u1`
+    /// for `Config { level: 66 directions, ..Config::paper() }`.
+    pub fn name(&self) -> String {
+        let default = Config::default();
+        let mut name = format!("{NAME}-k{}", self.level.directions());
+        let switches = [
+            (self.test == VertexTest::OcclusionQuery, "-queries"),
+            (self.weights == Weights::Equal, "-equal-weights"),
+            (self.normalization == Normalization::Off, "-raw"),
+        ];
+        for (applies, suffix) in switches {
+            if applies {
+                name.push_str(suffix);
+            }
+        }
+        if let Some(filtering) = self.filtering {
+            name.push_str("-filtered");
+            if filtering != Filtering::default() {
+                name.push_str(&format!("{}", filtering.threshold));
+            }
+        }
+        if let Some(idle) = self.idle_level {
+            name.push_str(&format!("-refined{}", idle.directions()));
+        }
+        if self.orientation != default.orientation {
+            name.push_str(match self.orientation {
+                Orientation::Axes => "-axes",
+                Orientation::Turned => "-turned",
+            });
+        }
+        if let Occluder::Simplified { texels } = self.occluder {
+            name.push_str("-simplified");
+            if self.occluder != Config::fast().occluder {
+                name.push_str(&format!("{texels}"));
+            }
+        }
+        if self.map_resolution != default.map_resolution {
+            name.push_str(&format!("-map{}", self.map_resolution));
+        }
+        if self.offset != default.offset {
+            name.push_str(&offset_name(self.offset));
+        }
+        if self.prefilter != default.prefilter {
+            name.push_str(&format!("-blur{}", self.prefilter));
+        }
+        name
+    }
+
     /// The finest level the method can reach.
     pub fn finest(&self) -> Level {
         self.idle_level
@@ -194,7 +279,7 @@ impl Config {
     /// Fails with [`Error::InvalidConfig`] naming the first setting out of
     /// range.
     pub fn check(&self) -> Result<()> {
-        let bad = |what: String| Err(Error::config("occlusion-query", what));
+        let bad = |what: String| Err(Error::config(NAME, what));
         if !(8..=4096).contains(&self.map_resolution) {
             return bad(format!(
                 "depth map resolution {} is outside 8..=4096",
@@ -210,9 +295,9 @@ impl Config {
             offset.toward_light,
             offset.along_normal,
         ];
-        if !terms.into_iter().all(non_negative) {
+        if !terms.into_iter().all(non_negative) || offset.occluder_units > i32::MAX as u32 {
             return bad(format!(
-                "depth offset {offset:?} must be finite and non-negative"
+                "depth offset {offset:?} must be finite and non-negative (units at most 2^31 - 1)"
             ));
         }
         if let Some(f) = self.filtering
@@ -237,5 +322,82 @@ impl Config {
             ));
         }
         Ok(())
+    }
+}
+
+/// `-offset` and the offset's terms that are not zero, e.g.
+/// `-offset-f1-u1` for [`DepthOffset::PAPER`].
+fn offset_name(offset: DepthOffset) -> String {
+    let terms = [
+        ("f", offset.occluder_slope),
+        ("u", offset.occluder_units as f32),
+        ("c", offset.occluder_clamp),
+        ("s", offset.receiver_slope),
+        ("l", offset.toward_light),
+        ("n", offset.along_normal),
+    ];
+    let mut name = "-offset".to_string();
+    for (letter, value) in terms {
+        if value != 0.0 {
+            name.push_str(&format!("-{letter}{value}"));
+        }
+    }
+    if offset == DepthOffset::NONE {
+        name.push_str("-none");
+    }
+    name
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every setting that changes the result shows in the name; the
+    /// defaults do not.
+    #[test]
+    fn names_say_every_setting_that_changes_the_result() {
+        assert_eq!(Config::default().name(), "occlusion-query-k258");
+        assert_eq!(Config::fast().name(), "occlusion-query-k258-simplified");
+        let paper = Config {
+            level: Level::new(2).unwrap(),
+            ..Config::paper()
+        };
+        let paper_name = match Config::default().orientation {
+            Orientation::Turned => {
+                "occlusion-query-k66-queries-equal-weights-raw-axes-offset-f1-u1"
+            }
+            Orientation::Axes => "occlusion-query-k66-queries-equal-weights-raw-offset-f1-u1",
+        };
+        assert_eq!(paper.name(), paper_name);
+        let changed = Config {
+            idle_level: Level::new(4),
+            filtering: Some(Filtering { threshold: 0.1 }),
+            occluder: Occluder::Simplified { texels: 2.0 },
+            map_resolution: 256,
+            offset: DepthOffset {
+                along_normal: 0.75,
+                ..DepthOffset::NONE
+            },
+            prefilter: 0.3,
+            ..Config::default()
+        };
+        assert_eq!(
+            changed.name(),
+            "occlusion-query-k258-filtered0.1-refined1026-simplified2-map256-offset-n0.75-blur0.3"
+        );
+        let none = Config {
+            offset: DepthOffset::NONE,
+            ..Config::default()
+        };
+        assert_eq!(none.name(), "occlusion-query-k258-offset-none");
+        // Two settings that differ have different names.
+        assert_ne!(
+            Config {
+                prefilter: 0.5,
+                ..Config::default()
+            }
+            .name(),
+            Config::default().name()
+        );
     }
 }

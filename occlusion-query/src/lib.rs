@@ -11,7 +11,7 @@ mod views;
 mod visibility;
 
 pub use config::{Config, DepthOffset, Filtering, Normalization, Occluder, VertexTest};
-pub use lightsphere::{Level, Lightsphere, Weights};
+pub use lightsphere::{Level, Lightsphere, Orientation, Weights};
 pub use method::OcclusionQuery;
 pub use views::{Atlas, orthographic, texel};
 pub use visibility::{QUERIES_PER_PASS, TestOffset};

@@ -12,9 +12,9 @@ use shadow_core::{
     FrameGeometry, Image, Mesh, Pose, Profile, Result, Scene, ShadowMethod, Stage, VertexRadiance,
 };
 
-use crate::config::{Config, DepthOffset, Normalization, Occluder, VertexTest};
+use crate::config::{Config, DepthOffset, Normalization, Occluder};
 use crate::filter::{CameraFilter, vertices_of};
-use crate::lightsphere::{Level, Lightsphere, Weights};
+use crate::lightsphere::{Level, Lightsphere};
 use crate::occluder;
 use crate::shading::Shading;
 use crate::views::{self, GpuDirection};
@@ -41,8 +41,9 @@ pub struct OcclusionQuery {
     name: String,
     config: Config,
     ctx: Arc<GpuContext>,
-    /// The finest level's directions; coarser levels are prefixes.
-    sphere: Lightsphere,
+    /// Every level up to the finest: each level's directions are a prefix of
+    /// the finest's, but its weights are its own.
+    spheres: Vec<Lightsphere>,
     scene: Option<Prepared>,
     state: Option<State>,
     environment: Option<Environment>,
@@ -56,6 +57,9 @@ struct Prepared {
     vertex_counts: Vec<usize>,
     /// Every triangle, as indices into all objects' vertices.
     triangles: Vec<u32>,
+    /// The vertices of no triangle: the camera never sees them, so vertex
+    /// filtering evaluates them with the first update of a geometry.
+    loose: Vec<u32>,
     /// The model-space mesh of a scene of one object moving rigidly (§6):
     /// uploaded once, its visibility turned with it.
     model: Option<Arc<Mesh>>,
@@ -106,31 +110,13 @@ impl OcclusionQuery {
     /// settings out of range.
     pub fn new(ctx: Arc<GpuContext>, config: Config) -> Result<OcclusionQuery> {
         config.check()?;
-        // The name says every choice that changes the result, so that a
-        // report says which weights, test and depth maps it shows.
-        let mut name = format!("{NAME}-k{}", config.level.directions());
-        let suffixes = [
-            (config.test == VertexTest::OcclusionQuery, "-queries"),
-            (config.weights == Weights::Equal, "-equal-weights"),
-            (config.normalization == Normalization::Off, "-raw"),
-            (config.filtering.is_some(), "-filtered"),
-            (config.idle_level.is_some(), "-refined"),
-            (
-                matches!(config.occluder, Occluder::Simplified { .. }),
-                "-simplified",
-            ),
-        ];
-        for (applies, suffix) in suffixes {
-            if applies {
-                name.push_str(suffix);
-            }
-        }
-        if config.map_resolution != Config::default().map_resolution {
-            name.push_str(&format!("-map{}", config.map_resolution));
-        }
+        let name = config.name();
         Ok(OcclusionQuery {
             name,
-            sphere: Lightsphere::new(config.finest(), config.weights),
+            spheres: (0..=config.finest().get())
+                .filter_map(Level::new)
+                .map(|level| Lightsphere::new(level, config.weights, config.orientation))
+                .collect(),
             config,
             ctx,
             scene: None,
@@ -143,6 +129,15 @@ impl OcclusionQuery {
 
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// The lightsphere of `level` (at most the configuration's finest).
+    fn sphere(&self, level: Level) -> &Lightsphere {
+        &self.spheres[level.get() as usize]
+    }
+
+    fn finest(&self) -> &Lightsphere {
+        self.sphere(self.config.finest())
     }
 
     /// Where direction `j`'s depth map looks from in the current frame:
@@ -216,13 +211,9 @@ impl OcclusionQuery {
         let mut jobs = Vec::new();
         if changed {
             let (centre, radius) = bounding_sphere(&positions);
-            let (directions, offset) = fitted(
-                &self.sphere,
-                centre,
-                radius,
-                &self.config,
-                scene.simplification,
-            );
+            let finest = &self.spheres[self.config.finest().get() as usize];
+            let (directions, offset) =
+                fitted(finest, centre, radius, &self.config, scene.simplification);
             scene.gpu.geometry.write(&ctx, &positions, &normals);
             scene.gpu.visibility.set_view(&ctx, &directions, offset);
             if let Some(filter) = &mut scene.gpu.filter {
@@ -240,9 +231,17 @@ impl OcclusionQuery {
                 evaluated: vec![scene.gpu.filter.is_none(); vertices],
                 lit: None,
             });
-            if scene.gpu.filter.is_none() {
+            let state = self.state.as_mut().expect("set above");
+            let list = match scene.gpu.filter {
+                None => (0..vertices as u32).collect(),
+                Some(_) => scene.loose.clone(),
+            };
+            for &v in &list {
+                state.evaluated[v as usize] = true;
+            }
+            if !list.is_empty() {
                 jobs.push(Job {
-                    list: (0..vertices as u32).collect(),
+                    list,
                     directions: 0..level.directions(),
                 });
             }
@@ -329,11 +328,16 @@ impl OcclusionQuery {
             .find(|(l, _)| *l == level)
             .expect("added above")
             .1;
-        let incoming: Vec<Vec3> = self.sphere.directions()[..level.directions()]
+        let sphere = self.sphere(level);
+        let incoming: Vec<Vec3> = sphere
+            .directions()
             .iter()
             .map(|&l| map.lookup(rotation * l))
             .collect();
-        scene.gpu.shading.set_incoming(&self.ctx, &incoming);
+        scene
+            .gpu
+            .shading
+            .set_incoming(&self.ctx, &incoming, sphere.weights());
         self.profile
             .seconds(Stage::Relight, "look-ups", start.elapsed().as_secs_f64());
         self.state.as_mut().expect("present").lit = Some(wanted);
@@ -452,6 +456,7 @@ impl OcclusionQuery {
         let texel = 2.0 * 1.01 * bounding_sphere(&points).1 / self.config.map_resolution as f32;
         let mut first = 0u32;
         let mut simplification = 0.0f32;
+        let mut in_triangle = Vec::new();
         for (o, object) in scene.objects().iter().enumerate() {
             let mesh = &object.mesh;
             triangles.extend(mesh.triangles().iter().flatten().map(|&v| v + first));
@@ -466,12 +471,17 @@ impl OcclusionQuery {
             let drawn = meshopt::optimize_vertex_cache(drawn.as_flattened(), mesh.vertex_count());
             occluders.extend(drawn.iter().map(|&v| v + first));
             objects.extend(std::iter::repeat_n(o as u32, mesh.vertex_count()));
+            let mut used = vec![false; mesh.vertex_count()];
+            for &v in mesh.triangles().iter().flatten() {
+                used[v as usize] = true;
+            }
+            in_triangle.extend(used);
             first += mesh.vertex_count() as u32;
         }
         let vertices = first as usize;
         let zeros = vec![Vec4::ZERO; vertices];
         let ctx = &self.ctx;
-        let k = self.sphere.len();
+        let k = self.finest().len();
         let config = &self.config;
         let materials: Vec<Brdf> = scene.objects().iter().map(|o| o.material).collect();
         let gpu = ctx.capture("occlusion-query: prepare", || {
@@ -506,6 +516,9 @@ impl OcclusionQuery {
                 .map(|o| o.mesh.vertex_count())
                 .collect(),
             triangles,
+            loose: (0..vertices as u32)
+                .filter(|&v| !in_triangle[v as usize])
+                .collect(),
             model,
             simplification,
             gpu,
@@ -719,10 +732,8 @@ impl ShadowMethod for OcclusionQuery {
             }
         }
         let rotation = rotation_of(state.transform);
-        let directions = self.sphere.directions()[..k]
-            .iter()
-            .map(|&l| rotation * l)
-            .collect();
+        let sphere = self.sphere(state.level);
+        let directions = sphere.directions().iter().map(|&l| rotation * l).collect();
         let normals = state
             .frame
             .objects
@@ -731,7 +742,7 @@ impl ShadowMethod for OcclusionQuery {
             .collect();
         let mut exported = DirectionalVisibility::new(
             directions,
-            self.sphere.weights()[..k].to_vec(),
+            sphere.weights().to_vec(),
             scene.vertex_counts.clone(),
             normals,
             visible,

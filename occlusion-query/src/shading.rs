@@ -178,9 +178,14 @@ impl Shading {
         }
     }
 
-    /// Sets the radiance arriving from each direction.
-    pub fn set_incoming(&self, ctx: &GpuContext, radiance: &[Vec3]) {
-        let values: Vec<Vec4> = radiance.iter().map(|r| r.extend(0.0)).collect();
+    /// Sets the radiance arriving from each direction of the shaded level
+    /// and the solid angle each stands for at that level.
+    pub fn set_incoming(&self, ctx: &GpuContext, radiance: &[Vec3], weights: &[f32]) {
+        let values: Vec<Vec4> = radiance
+            .iter()
+            .zip(weights)
+            .map(|(r, &w)| r.extend(w))
+            .collect();
         ctx.queue
             .write_buffer(&self.incoming, 0, bytemuck::cast_slice(&values));
     }

@@ -13,7 +13,8 @@ use crate::lightsphere::Lightsphere;
 pub struct GpuDirection {
     /// World (or model) space to the clip space of the direction's map.
     pub clip_from_world: Mat4,
-    /// Toward the light (xyz) and its weight in steradians (w).
+    /// Toward the light (xyz); w is padding (a direction's weight depends on
+    /// the level shaded, and travels with the incoming radiance).
     pub light: Vec4,
 }
 
@@ -44,10 +45,9 @@ pub fn directions(sphere: &Lightsphere, centre: Vec3, radius: f32) -> Vec<GpuDir
     sphere
         .directions()
         .iter()
-        .zip(sphere.weights())
-        .map(|(&light, &weight)| GpuDirection {
+        .map(|&light| GpuDirection {
             clip_from_world: orthographic(light, centre, radius),
-            light: light.extend(weight),
+            light: light.extend(0.0),
         })
         .collect()
 }

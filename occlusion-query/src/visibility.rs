@@ -266,12 +266,12 @@ impl Visibility {
                 cache: None,
             })
         };
-        // The polygon offset's factor (§3.2): slope-scaled bias on the
-        // occluders; the tested points move instead of a constant term.
-        // A texel is 1/map of the map's depth range (the view volume is a
-        // cube around the bounding sphere), so the clamp is in texels too.
-        let slope = wgpu::DepthBiasState {
-            constant: 0,
+        // The polygon offset (§3.2) on the occluders: factor × depth slope +
+        // units × the depth format's step. A texel is 1/map of the map's
+        // depth range (the view volume is a cube around the bounding
+        // sphere), so the clamp is in texels too.
+        let polygon_offset = wgpu::DepthBiasState {
+            constant: config.offset.occluder_units as i32,
             slope_scale: config.offset.occluder_slope,
             clamp: config.offset.occluder_clamp / config.map_resolution as f32,
         };
@@ -279,7 +279,7 @@ impl Visibility {
             "occluder",
             wgpu::PrimitiveTopology::TriangleList,
             true,
-            slope,
+            polygon_offset,
         );
         let point = render(
             "point",

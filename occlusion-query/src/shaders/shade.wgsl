@@ -29,7 +29,9 @@ struct Material {
 
 @group(0) @binding(0) var<uniform> shade: Shade;
 @group(0) @binding(1) var<storage, read> directions: array<Direction>;
-// Radiance arriving from each direction (rgb).
+// Radiance arriving from each direction (rgb) and the solid angle the
+// direction stands for at the level shaded (w): a coarser level's cells are
+// larger than the finest level's.
 @group(0) @binding(2) var<storage, read> incoming: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> positions: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> normals: array<vec4<f32>>;
@@ -68,7 +70,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         if c <= 0.0 {
             continue;
         }
-        let wc = l.w * c;
+        let wc = incoming[j].w * c;
         cosine += wc;
         if (bits[v * shade.words + j / 32u] & (1u << (j % 32u))) != 0u {
             var f = m.diffuse.xyz / PI;
