@@ -1,6 +1,6 @@
 //! The method's settings.
 
-use shadow_core::{Error, Result};
+use shadow_core::{Error, Result, sh::Window};
 
 /// How occluders are gathered into groups, each casting through one
 /// occlusion map per light and receiver (§4.2.3). Shadows cast within a
@@ -35,6 +35,10 @@ pub struct Config {
     /// each light (eq. 7–8, §4.2.4), so that a direction both self- and
     /// other-occluded is not subtracted twice. Off gives eq. 4.
     pub self_visibility: bool,
+    /// σ-factors applied to the SH bands of the self-shadowed lighting, the
+    /// diffuse lighting's and the glossy lit transfer's, against the
+    /// ringing of a small bright source (shadow-core's [`Window`]).
+    pub window: Window,
 }
 
 impl Default for Config {
@@ -45,6 +49,7 @@ impl Default for Config {
             rays: 512,
             grouping: Grouping::Overlapping { overlap: 0.5 },
             self_visibility: true,
+            window: Window::None,
         }
     }
 }

@@ -143,6 +143,9 @@ impl DeferredShadow {
         if !config.self_visibility {
             name += "-uncorrected";
         }
+        if config.window != default.window {
+            name += &format!("-{}", config.window.name());
+        }
         Ok(DeferredShadow {
             ctx,
             config,
@@ -331,7 +334,7 @@ impl DeferredShadow {
         self.profile
             .seconds(Stage::Relight, "area lights", start.elapsed().as_secs_f64());
         let start = Instant::now();
-        let lighting = Lighting::new(environment);
+        let lighting = Lighting::new(environment, self.config.window);
         self.profile.seconds(
             Stage::Relight,
             "SH lighting and matrix",

@@ -31,7 +31,7 @@ use shadow_core::{
     bvh::SceneBvh,
     qmc::{cosine_hemisphere, sobol2},
     ray_origin,
-    sh::{ShOrder, ShRgb, ShRotation, Zonal, eval_basis, project_environment},
+    sh::{ShOrder, ShRgb, ShRotation, Window, Zonal, eval_basis, project_environment},
 };
 
 use crate::lights::Samples;
@@ -163,11 +163,14 @@ impl Transfer {
 /// The lighting in the forms the self-shadowing needs, in world space.
 #[derive(Clone, Debug)]
 pub struct Lighting {
-    /// The environment's projection, [`DIFFUSE_ORDER`].
+    /// The environment's projection, [`DIFFUSE_ORDER`], windowed.
     pub sh: ShRgb,
     /// Eq. 10's matrix L_ij = ∫ L y_i y_j dω over [`GLOSSY_ORDER`]'s
     /// basis, row-major, 16 × 16.
     pub matrix: Vec<Vec3>,
+    /// The window on the diffuse lighting's bands and on the glossy lit
+    /// transfer's (P = L t, before the lobe).
+    pub window: Window,
 }
 
 /// The matrix is integrated over the map at most this many texels wide.
@@ -182,8 +185,10 @@ impl Lighting {
     /// maps narrower than 128 texels as the area lights split them: over
     /// the 16 × 8 texels of [`Environment::uniform`] alone the rule is off
     /// the identity by 0.047, split by 6.0e-4.
-    pub fn new(environment: &Environment) -> Lighting {
-        let sh = project_environment(environment, DIFFUSE_ORDER);
+    /// `window` scales the bands of the diffuse projection here, and those
+    /// of each glossy vertex's lit transfer in [`glossy`].
+    pub fn new(environment: &Environment, window: Window) -> Lighting {
+        let sh = window.apply(&project_environment(environment, DIFFUSE_ORDER));
         let env = if environment.width() > MATRIX_WIDTH {
             environment.downsampled(MATRIX_WIDTH, MATRIX_WIDTH / 2)
         } else {
@@ -219,7 +224,11 @@ impl Lighting {
                     a
                 },
             );
-        Lighting { sh, matrix }
+        Lighting {
+            sh,
+            matrix,
+            window,
+        }
     }
 }
 
@@ -255,7 +264,10 @@ pub fn glossy(
 ) -> Vec<GlossyVertex> {
     let n = GLOSSY_ORDER.coeff_count();
     let lambda: Vec<f32> = (0..n)
-        .map(|i| lobe.eigenvalues()[(i as f32).sqrt() as usize])
+        .map(|i| {
+            let band = (i as f32).sqrt() as usize;
+            lobe.eigenvalues()[band] * lighting.window.factor(band, GLOSSY_ORDER)
+        })
         .collect();
     // ∫ P dω = √(4π) P_0.
     let integral = (4.0 * PI).sqrt();
@@ -393,7 +405,7 @@ mod tests {
     /// ρ/π L·t, with L·t = π), turned or not.
     #[test]
     fn the_diffuse_furnace_gives_the_albedo() {
-        let lighting = Lighting::new(&Environment::uniform(Vec3::ONE));
+        let lighting = Lighting::new(&Environment::uniform(Vec3::ONE), Window::None);
         let albedo = Vec3::new(0.2, 0.5, 0.9);
         let turn = Mat3::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 1.1);
         let mut worst = 0.0f32;
@@ -418,7 +430,7 @@ mod tests {
     /// with the Legendre polynomials P_l written out here).
     #[test]
     fn the_glossy_furnace_gives_the_diffuse_albedo_and_the_zonal_lobe() {
-        let lighting = Lighting::new(&Environment::uniform(Vec3::ONE));
+        let lighting = Lighting::new(&Environment::uniform(Vec3::ONE), Window::None);
         let rho = Vec3::new(0.2, 0.4, 0.6);
         let exponent = 12.0;
         let phong = Zonal::phong(GLOSSY_ORDER, exponent).unwrap();
@@ -481,7 +493,7 @@ mod tests {
             Environment::uniform(Vec3::ONE),
             Environment::new("fine", w, h, vec![Vec3::ONE; w * h]).unwrap(),
         ] {
-            let lighting = Lighting::new(&env);
+            let lighting = Lighting::new(&env, Window::None);
             let n = GLOSSY_ORDER.coeff_count();
             let mut worst = 0.0f32;
             for i in 0..n {

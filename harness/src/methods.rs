@@ -94,7 +94,7 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
     (
         "deferred-shadow:q=N",
-        "N area lights (1..=256); more options: map=N (occlusion map side), rays=N (precomputation rays per vertex), uncorrected (no self-visibility correction of the occlusion, eq. 4 instead of eq. 8)",
+        "N area lights (1..=256); more options: map=N (occlusion map side), rays=N (precomputation rays per vertex), uncorrected (no self-visibility correction of the occlusion, eq. 4 instead of eq. 8), window=none|hanning|lanczos (σ-factors on the SH bands of the self-shadowed lighting)",
     ),
     (
         "raytrace:N",
@@ -299,12 +299,16 @@ fn deferred_shadow_config(name: &str) -> Result<deferred_shadow::Config> {
         let number = |value| whole(name, option, value);
         match option.split_once('=') {
             None if option == "uncorrected" => config.self_visibility = false,
+            Some(("window", w)) => match shadow_core::sh::Window::from_name(w) {
+                Some(window) => config.window = window,
+                None => return bad(format!("window={w}: windows are none, hanning, lanczos")),
+            },
             Some(("q", q)) => config.lights = number(q)? as usize,
             Some(("map", n)) => config.map_resolution = number(n)?,
             Some(("rays", n)) => config.rays = number(n)?,
             _ => {
                 return bad(format!(
-                    "unknown option {option:?}; options are q=N, map=N, rays=N, uncorrected"
+                    "unknown option {option:?}; options are q=N, map=N, rays=N, uncorrected, window=none|hanning|lanczos"
                 ));
             }
         }
