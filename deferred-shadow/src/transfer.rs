@@ -224,11 +224,7 @@ impl Lighting {
                     a
                 },
             );
-        Lighting {
-            sh,
-            matrix,
-            window,
-        }
+        Lighting { sh, matrix, window }
     }
 }
 

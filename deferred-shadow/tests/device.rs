@@ -59,8 +59,12 @@ fn run(method: &mut DeferredShadow, scene: &Scene, env: &Environment) -> shadow_
 /// wider than the device's widest texture) is the stage's `Error::Gpu`,
 /// recorded or blocking, and the method renders again afterwards.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn an_image_too_wide_for_the_device_is_an_error_of_the_stage() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
     let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
     run(&mut method, &scene, &patchy()).unwrap();
@@ -92,11 +96,9 @@ fn block_on<F: Future>(future: F) -> F::Output {
 /// A host's device on the test adapter whose storage bindings hold at most
 /// `bytes`: wgpu's default handler panics on any error raised outside a
 /// capture there.
-fn small_device(bytes: u64) -> Option<Arc<GpuContext>> {
-    test_context()?;
-    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
-    descriptor.backends = wgpu::Backends::PRIMARY;
-    let instance = wgpu::Instance::new(descriptor.with_env());
+fn small_device(bytes: u64) -> Arc<GpuContext> {
+    let _shared = test_context();
+    let instance = wgpu::Instance::new(shadow_core::gpu::instance_descriptor());
     let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
         .expect("the adapter test_context found");
     let limits = wgpu::Limits {
@@ -108,18 +110,20 @@ fn small_device(bytes: u64) -> Option<Arc<GpuContext>> {
         ..Default::default()
     }))
     .expect("a device with lower limits");
-    Some(Arc::new(GpuContext::from_device(device, queue)))
+    Arc::new(GpuContext::from_device(device, queue))
 }
 
 /// More map storage than the device binds is refused as a configuration
 /// error that names the settings, the bytes needed and the limit, before
 /// anything is allocated; settings that fit run on the same device.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn maps_beyond_the_device_limit_are_refused_by_name() {
     let limit = 1 << 20;
-    let Some(ctx) = small_device(limit) else {
-        return;
-    };
+    let ctx = small_device(limit);
     let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
     // 32 lights and 128² maps (64 KiB each): more than the 16 maps 1 MiB
     // holds on this scene.
@@ -153,8 +157,12 @@ fn maps_beyond_the_device_limit_are_refused_by_name() {
 /// gives. The ball is glossy, so its self-shadowed radiance depends on the
 /// eye too; the same holds for two eyes' vertex radiance.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn two_cameras_recorded_into_one_encoder_each_get_their_own_image() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let glossy = Brdf::phong(Vec3::splat(0.3), Vec3::splat(0.5), 20.0).unwrap();
     let scene = ball_on_floor(glossy);
     let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();

@@ -74,8 +74,12 @@ fn level(s: u8) -> Level {
 /// reduce, not the depth maps (every offset and resolution that avoids
 /// acne gives 2.9–3.2% there).
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn bunny_error_falls_as_the_lightsphere_grows() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let scene = scenes::builtin("bunny-35k").unwrap();
     let env = scenes::environment("forest").unwrap();
     let reference = subset_reference(&scene, &env, 31, 0.005);
@@ -97,8 +101,12 @@ fn bunny_error_falls_as_the_lightsphere_grows() {
 /// `courtyard`: the error per lightsphere level, which a lobe of that width
 /// needs many directions to follow.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn glossy_error_falls_with_more_directions() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let scene = glossy_scene();
     let env = scenes::environment("courtyard").unwrap();
     let reference = subset_reference(&scene, &env, 3, 0.01);
@@ -215,8 +223,12 @@ fn offset(
 /// a thin occluder see through it, and too coarse a map blurs contact. The default offset
 /// and resolution sit at the smallest error of the sweep.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn default_offset_and_resolution_sit_at_the_error_minimum() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let scene = stress_scene();
     let env = Environment::uniform(Vec3::ONE);
     let reference = subset_reference(&scene, &env, 1, 0.005);

@@ -147,10 +147,12 @@ fn exported_transfer_relights_to_the_methods_own_radiance() {
 /// deferred-shadow exports its self-transfer: on one object (nothing else
 /// casts on it) that is all it shades.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn exported_self_transfer_relights_to_the_methods_own_radiance() {
-    let Some(context) = shadow_core::gpu::test_context() else {
-        return;
-    };
+    let context = shadow_core::gpu::test_context();
     relit_transfer_matches(exported(
         "teapot",
         "deferred-shadow",
@@ -270,10 +272,12 @@ fn exported_visibility_unpacks_as_documented() {
 /// under a second environment as the module docs say, is what the method
 /// shades after relighting.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn exported_visibility_relights_to_the_methods_own_radiance() {
-    let Some(context) = shadow_core::gpu::test_context() else {
-        return;
-    };
+    let context = shadow_core::gpu::test_context();
     let (mut method, scene, arrays, meta) =
         exported("wall", "occlusion-query:k=66", &SharedGpu::with(context));
     assert_eq!(meta["kind"], "directional_visibility");
@@ -329,6 +333,10 @@ fn harness_command(args: &[&str], cache: &Path) -> std::process::Output {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn image_scores_agree_with_the_written_images() {
     let dir = tempfile::tempdir().unwrap();
     let (report, pictures, cache) = (
@@ -444,22 +452,33 @@ fn bad_requests_are_refused_before_any_work() {
     refused(&out, "invalid configuration");
 
     // A GPU method where wgpu finds no adapter (only Metal allowed, on a
-    // machine without it): a clear error before any reference is computed.
+    // machine without it), or only an OpenGL one, whose shading language
+    // cannot read depth textures as the methods do: a clear error before
+    // any reference is computed.
     if cfg!(not(target_os = "macos")) {
-        let out = Command::new(env!("CARGO_BIN_EXE_harness"))
-            .args([
-                "run",
-                "--scene",
-                "wall",
-                "--method",
-                "occlusion-query",
-                "--cache",
-            ])
-            .arg(&cache)
-            .env("WGPU_BACKEND", "metal")
-            .output()
-            .unwrap();
-        refused(&out, "no GPU adapter found");
+        let with_backend = |backend: &str| {
+            Command::new(env!("CARGO_BIN_EXE_harness"))
+                .args([
+                    "run",
+                    "--scene",
+                    "wall",
+                    "--method",
+                    "occlusion-query",
+                    "--cache",
+                ])
+                .arg(&cache)
+                .env("WGPU_BACKEND", backend)
+                .output()
+                .unwrap()
+        };
+        refused(&with_backend("metal"), "no GPU adapter found");
+        let gl = with_backend("gl");
+        let err = String::from_utf8_lossy(&gl.stderr);
+        assert!(!gl.status.success(), "accepted on OpenGL: {err}");
+        assert!(
+            err.contains("runs on OpenGL") || err.contains("no GPU adapter found"),
+            "{err}"
+        );
         assert!(!cache.exists());
     }
 }

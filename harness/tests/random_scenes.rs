@@ -207,19 +207,12 @@ fn tolerance(method: &str, light: Light, glossy: bool) -> Tolerance {
     Tolerance { alpha, beta }
 }
 
-/// The device every GPU method of this test binary shares, opened once; on a
-/// machine without an adapter `None` (GPU methods skipped, with a message),
-/// unless `CI` is set: then [`test_context`] fails the test.
-fn gpu() -> Option<&'static SharedGpu> {
-    static GPU: OnceLock<Option<SharedGpu>> = OnceLock::new();
-    GPU.get_or_init(|| {
-        let context = test_context();
-        if context.is_none() {
-            eprintln!("no GPU adapter: the GPU methods are skipped");
-        }
-        context.map(SharedGpu::with)
-    })
-    .as_ref()
+/// The device every GPU method of this test binary shares, opened once
+/// ([`test_context`]: without an adapter the test fails, naming what to
+/// install).
+fn gpu() -> &'static SharedGpu {
+    static GPU: OnceLock<SharedGpu> = OnceLock::new();
+    GPU.get_or_init(|| SharedGpu::with(test_context()))
 }
 
 /// Uniform draws from a seeded stream.
@@ -557,11 +550,7 @@ fn check_scene(seed: u64) -> Result<(), TestCaseError> {
     let mut bound: Option<Vec<Vec<Vec3>>> = None;
     let cpu_only = SharedGpu::new();
     for &name in METHODS {
-        let gpu = match (is_gpu(name), gpu()) {
-            (false, _) => &cpu_only,
-            (true, Some(gpu)) => gpu,
-            (true, None) => continue,
-        };
+        let gpu = if is_gpu(name) { gpu() } else { &cpu_only };
         let mut method =
             methods::by_name(name, gpu).map_err(|e| fail(format!("{name} does not build: {e}")))?;
         let lacks = Capabilities::needed_by(scene)
@@ -628,8 +617,12 @@ fn check_scene(seed: u64) -> Result<(), TestCaseError> {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn every_method_stays_finite_and_under_the_unoccluded_light_on_random_scenes() {
-    // Opened before the cases, so that a missing adapter under CI fails here.
+    // Opened before the cases, so that a missing adapter fails here.
     let _ = gpu();
     let replay = std::env::var("RANDOM_SCENES_SEED").ok().map(|s| {
         u64::from_str_radix(s.trim_start_matches("0x"), 16)

@@ -44,6 +44,14 @@ fn mean(values: impl Iterator<Item = f64>) -> f64 {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+#[cfg_attr(
+    skip_browser_tests,
+    ignore = "needs Chromium and playwright-core (SOFT_SHADOWS_SKIP lists browser)"
+)]
 fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
     let (_keep, out) = quick_report();
     let json: Value =
@@ -174,15 +182,12 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
 fn browser_check(page: &Path) {
     let tools = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/browser");
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
-    if !tools.join("node_modules/playwright-core").exists() || !Path::new(&chromium).exists() {
-        let why = format!(
-            "Chromium ({chromium}) or playwright-core (npm ci --prefix {}) is not installed",
-            tools.display()
-        );
-        assert!(std::env::var_os("CI").is_none(), "{why}");
-        eprintln!("skipped the browser check: {why}");
-        return;
-    }
+    assert!(
+        tools.join("node_modules/playwright-core").exists() && Path::new(&chromium).exists(),
+        "this test needs Chromium ({chromium}; apt-get install chromium) and playwright-core \
+         (npm ci --prefix {}), or SOFT_SHADOWS_SKIP=browser to skip it",
+        tools.display()
+    );
     let shot = page.with_file_name("first-chart.png");
     let out = Command::new("node")
         .arg(tools.join("check-page.mjs"))

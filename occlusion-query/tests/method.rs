@@ -76,8 +76,12 @@ fn visibility(method: &OcclusionQuery) -> DirectionalVisibility {
 /// per-vertex normalization, at every level; the raw quadrature's error
 /// shrinks with the level.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn white_furnace_gives_the_albedo() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let sphere = scene(
         vec![shapes::uv_sphere("sphere", Vec3::ZERO, 1.0, 12, 24).unwrap()],
         0.7,
@@ -162,8 +166,12 @@ fn polygon_form_factor(p: Vec3, n: Vec3, polygon: &[Vec3]) -> f32 {
 /// A floor beside a vertical wall under a uniform sky: each floor vertex
 /// gets ρ (1 − F), F the wall's form factor.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn a_wall_beside_a_floor_matches_lamberts_form_factor() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 16).unwrap();
     let (origin, up, along) = (Vec3::new(0.5, 0.0, 1.0), Vec3::Y, Vec3::NEG_Z * 2.0);
     let wall = shapes::grid("wall", origin, up / 4.0, along / 8.0, 4, 8).unwrap();
@@ -207,8 +215,12 @@ fn a_wall_beside_a_floor_matches_lamberts_form_factor() {
 /// query sets' worth of passes) and the compute pass give the same bits up
 /// to points on a pixel's edge.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn queries_and_depth_compare_agree() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let meshes = vec![
         shapes::floor("floor", Vec3::ZERO, 2.0, 56).unwrap(),
         shapes::uv_sphere("a", Vec3::new(-0.5, 0.5, 0.0), 0.5, 24, 48).unwrap(),
@@ -279,8 +291,12 @@ fn queries_and_depth_compare_agree() {
 /// only the new directions' maps, and the result is bit for bit that of
 /// level 3 computed at once.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn idle_refinement_reuses_every_coarser_level() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let meshes = vec![
         shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
         shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
@@ -322,8 +338,12 @@ fn idle_refinement_reuses_every_coarser_level() {
 /// cells it came out at about 18/258 of it), and the exported weights sum
 /// to 4π at every level on the way.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn each_level_is_shaded_with_its_own_weights() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let meshes = vec![
         shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
         shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
@@ -375,8 +395,12 @@ fn side_lit() -> Environment {
 /// One object turning: the visibility of the first frame is kept (no maps
 /// drawn) and the lighting turns, close to computing the turned frame anew.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn a_rigid_object_turns_its_lighting_not_its_visibility() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let torus_like = shapes::lathe(
         "ring",
         &[
@@ -452,8 +476,12 @@ fn a_rigid_object_turns_its_lighting_not_its_visibility() {
 /// the image shows has all three vertices evaluated (Fig. 4), and not
 /// every vertex was evaluated at the first frame.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn filtering_never_shows_an_unevaluated_vertex() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let meshes = vec![
         shapes::floor("floor", Vec3::ZERO, 2.0, 24).unwrap(),
         shapes::uv_sphere("ball", Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32).unwrap(),
@@ -543,8 +571,12 @@ fn filtering_never_shows_an_unevaluated_vertex() {
 /// The stages recorded into a caller's encoder and submitted once give what
 /// the blocking stages give.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn recording_into_a_callers_encoder_matches_the_stages() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let meshes = vec![
         shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
         shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
@@ -593,8 +625,12 @@ fn recording_into_a_callers_encoder_matches_the_stages() {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn bad_settings_and_stages_out_of_order_are_errors() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     for bad in [
         Config {
             map_resolution: 0,
@@ -653,8 +689,12 @@ fn scene_of_two() -> Scene {
 
 /// Equal weights are the paper's 4π/k; Voronoi cells differ but sum alike.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn weights_are_selectable() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let scene = scene(
         vec![shapes::uv_sphere("s", Vec3::ZERO, 1.0, 6, 12).unwrap()],
         0.5,

@@ -317,7 +317,11 @@ mod tests {
             hits += seen.is_some() as usize;
             for (bvh, factor) in [(&tiny, 5e-4), (&huge, 5e3)] {
                 let scaled = bvh.closest_hit(o * factor, d, f32::INFINITY);
-                assert_eq!(scaled.map(|h| h.triangle), seen.map(|h| h.triangle), "ray {i}");
+                assert_eq!(
+                    scaled.map(|h| h.triangle),
+                    seen.map(|h| h.triangle),
+                    "ray {i}"
+                );
                 if let (Some(s), Some(u)) = (scaled, seen) {
                     assert_relative_eq!(s.t / factor, u.t, max_relative = 1e-3);
                 }

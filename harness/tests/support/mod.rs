@@ -1,7 +1,8 @@
 //! The npm glTF tools the tests run (`tools/gltf`): glTF Transform's command
 //! line, to make the variants a user's pipeline would, and the Khronos glTF
 //! validator. Without them (`npm ci --prefix tools/gltf` installs them) a
-//! test is skipped, unless `CI` is set: then it fails.
+//! test fails, naming the install; `SOFT_SHADOWS_SKIP=gltf-tools` marks
+//! those tests as ignored instead.
 
 #![allow(dead_code)] // each test binary uses part of this module
 
@@ -14,22 +15,20 @@ pub struct GltfTools {
 }
 
 impl GltfTools {
-    /// The tools, or `None` (after saying why) when they are not installed
-    /// and `CI` is not set.
-    pub fn find() -> Option<GltfTools> {
+    /// The tools; panics, naming the install and the opt-out, when they
+    /// are not installed.
+    pub fn find() -> GltfTools {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tools/gltf");
         let installed = dir.join("node_modules/.bin/gltf-transform").exists()
             && dir.join("node_modules/gltf-validator").exists();
-        if installed {
-            return Some(GltfTools { dir });
-        }
-        let why = format!(
-            "the glTF tools are not installed in {} (run `npm ci --prefix tools/gltf`)",
+        assert!(
+            installed,
+            "this test needs the glTF tools, which are not installed in {}: \
+             run `npm ci --prefix tools/gltf` (Node.js 20), or set \
+             SOFT_SHADOWS_SKIP=gltf-tools to skip the tests that need them",
             dir.display()
         );
-        assert!(std::env::var_os("CI").is_none(), "{why}");
-        eprintln!("skipped: {why}");
-        None
+        GltfTools { dir }
     }
 
     /// Runs `gltf-transform ARGS…`, panicking with its output on failure.

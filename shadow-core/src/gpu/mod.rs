@@ -40,6 +40,20 @@ use crate::{Error, Result};
 
 pub use stages::GpuStages;
 
+/// How to get an adapter the methods run on where there is no GPU.
+pub const INSTALL_HINT: &str = "On Linux without a GPU install Mesa's software Vulkan driver: \
+     apt-get install mesa-vulkan-drivers libvulkan1";
+
+/// The instance settings [`GpuContext::new`] opens adapters with: the
+/// primary backends (Vulkan, Metal, DirectX 12), or those `WGPU_BACKEND`
+/// names, and wgpu's other environment variables. A host that opens its own
+/// device for the methods can start from it.
+pub fn instance_descriptor() -> wgpu::InstanceDescriptor {
+    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
+    descriptor.backends = wgpu::Backends::PRIMARY;
+    descriptor.with_env()
+}
+
 /// What the harness reports about the adapter a run used (DESIGN.md, "Time":
 /// a software adapter such as lavapipe is named as such).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -129,17 +143,22 @@ fn backend_names(backends: wgpu::Backends) -> String {
 }
 
 impl GpuContext {
-    /// Opens the high-performance adapter of the backends `WGPU_BACKEND`
-    /// allows (all by default; e.g. `WGPU_BACKEND=gl` forces OpenGL), without
-    /// a surface, and a device with default limits except the buffer and 2D
-    /// texture sizes, which are raised to what the adapter supports (the
-    /// methods keep one storage buffer per scene). No optional features are
+    /// Opens the high-performance adapter of the primary backends (Vulkan,
+    /// Metal, DirectX 12; `WGPU_BACKEND` picks others), without a surface,
+    /// and a device with default limits except the buffer and 2D texture
+    /// sizes, which are raised to what the adapter supports (the methods
+    /// keep one storage buffer per scene). No optional features are
     /// requested: occlusion queries are core WebGPU.
     ///
-    /// Fails with [`Error::Gpu`] when there is no adapter, saying how to get a
-    /// software one, or when the device cannot be created.
+    /// OpenGL is not among the backends tried: the methods' shaders read
+    /// depth textures with `textureLoad`, which GLSL cannot, and an OpenGL
+    /// adapter that `WGPU_BACKEND=gl` asks for is refused.
+    ///
+    /// Fails with [`Error::Gpu`] when there is no suitable adapter, saying
+    /// how to get a software one ([`INSTALL_HINT`]), or when the device
+    /// cannot be created.
     pub fn new() -> Result<GpuContext> {
-        let descriptor = wgpu::InstanceDescriptor::new_without_display_handle().with_env();
+        let descriptor = instance_descriptor();
         let requested = descriptor.backends;
         let instance = wgpu::Instance::new(descriptor);
         let options = wgpu::RequestAdapterOptions {
@@ -151,14 +170,18 @@ impl GpuContext {
         let adapter = pollster::block_on(instance.request_adapter(&options)).map_err(|e| {
             let env = std::env::var("WGPU_BACKEND").unwrap_or_else(|_| "unset".to_string());
             Error::Gpu(format!(
-                "no GPU adapter found ({e}; backends requested: {}, compiled in: {}, WGPU_BACKEND={env}). \
-                 On Linux without a GPU install Mesa's software Vulkan driver: \
-                 apt-get install mesa-vulkan-drivers libvulkan1",
+                "no GPU adapter found ({e}; backends requested: {}, compiled in: {}, WGPU_BACKEND={env}). {INSTALL_HINT}",
                 backend_names(requested),
                 backend_names(wgpu::Instance::enabled_backend_features())
             ))
         })?;
         let summary = AdapterSummary::new(&adapter.get_info());
+        if adapter.get_info().backend == wgpu::Backend::Gl {
+            return Err(Error::Gpu(format!(
+                "the adapter {summary} runs on OpenGL, whose shading language cannot read \
+                 depth textures as the methods do. {INSTALL_HINT}"
+            )));
+        }
         let supported = adapter.limits();
         let limits = wgpu::Limits {
             max_buffer_size: supported.max_buffer_size,
@@ -413,25 +436,30 @@ fn error_message(error: &wgpu::Error) -> String {
     message
 }
 
+/// The variable that lets the tests skip what the machine lacks: a
+/// comma-separated list of `gpu` (no adapter), `gltf-tools` (the npm glTF
+/// tools), `browser` (Chromium and playwright-core), or `all`. The build
+/// script of each crate with such tests reads it and marks the tests that
+/// need a listed thing as ignored, so that `cargo test` reports them as
+/// skipped, not passed; a README example that needs a GPU is then left out
+/// of the doctests.
+pub const SKIP_VARIABLE: &str = "SOFT_SHADOWS_SKIP";
+
 /// The context every GPU test in the workspace runs on: one per process,
 /// shared by the tests (as the harness shares one between methods).
 ///
-/// Without an adapter it prints why and returns `None`, so that the tests pass
-/// on machines without a GPU or Mesa. When the environment variable `CI` is
-/// set, a missing adapter panics instead: on CI the GPU tests must run, and a
-/// broken driver setup must fail the build rather than skip them quietly.
-pub fn test_context() -> Option<Arc<GpuContext>> {
+/// Without a suitable adapter it panics, naming what to install and how to
+/// skip the GPU tests instead ([`SKIP_VARIABLE`]): a GPU test never passes
+/// without having run.
+pub fn test_context() -> Arc<GpuContext> {
     static CONTEXT: std::sync::OnceLock<std::result::Result<Arc<GpuContext>, String>> =
         std::sync::OnceLock::new();
     match CONTEXT.get_or_init(|| GpuContext::new().map(Arc::new).map_err(|e| e.to_string())) {
-        Ok(context) => Some(Arc::clone(context)),
-        Err(e) if std::env::var_os("CI").is_some() => {
-            panic!("CI is set and GPU tests cannot run: {e}")
-        }
-        Err(e) => {
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
+        Ok(context) => Arc::clone(context),
+        Err(e) => panic!(
+            "this test needs a GPU adapter: {e}\n\
+             To skip the GPU tests instead (reported as ignored), set {SKIP_VARIABLE}=gpu."
+        ),
     }
 }
 

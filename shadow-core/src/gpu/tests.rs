@@ -3,8 +3,12 @@
 use super::*;
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn context_reports_its_adapter() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let text = ctx.adapter.to_string();
     println!("adapter: {text} (driver {})", ctx.adapter.driver);
     assert!(text.starts_with(&ctx.adapter.name));
@@ -16,8 +20,12 @@ fn context_reports_its_adapter() {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn compute_shader_round_trip_doubles_values() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let input: Vec<f32> = (0..1000).map(|i| i as f32 * 0.25 - 7.0).collect();
     let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
     let buffer = ctx.create_buffer_init("values", &input, usage);
@@ -69,8 +77,12 @@ fn compute_shader_round_trip_doubles_values() {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn bad_read_back_requests_are_errors_not_panics() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let buffer = ctx.create_buffer_init("small", &[1u32, 2, 3], wgpu::BufferUsages::COPY_SRC);
     assert!(ctx.read_buffer::<u32>(&buffer, 0, 4).is_err());
     assert!(ctx.read_buffer::<u32>(&buffer, 2, 1).is_err());
@@ -89,8 +101,12 @@ fn broken_shader(ctx: &GpuContext) -> wgpu::ShaderModule {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn errors_are_captured_by_the_call_that_raised_them() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let message = ctx
         .capture("compiling", || {
             broken_shader(&ctx);
@@ -116,8 +132,12 @@ fn errors_are_captured_by_the_call_that_raised_them() {
 /// Two users of one context on two threads: one keeps raising errors, the
 /// other never sees them.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn one_users_errors_never_reach_another() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     std::thread::scope(|s| {
         let faulty = s.spawn(|| {
             (0..20)
@@ -143,8 +163,12 @@ fn one_users_errors_never_reach_another() {
 }
 
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn missing_limits_and_features_are_named() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let modest = wgpu::Limits {
         max_storage_buffers_per_shader_stage: 4,
         ..wgpu::Limits::downlevel_webgl2_defaults()
@@ -176,13 +200,14 @@ fn missing_limits_and_features_are_named() {
 /// A host's device: its own handler keeps receiving its own uncaptured
 /// errors, and none of the context's captured ones.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn a_hosts_device_keeps_its_handlers() {
-    if test_context().is_none() {
-        return;
-    }
+    let _context = test_context();
     // The host opens its own device, as a renderer would.
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle().with_env());
+    let instance = wgpu::Instance::new(super::instance_descriptor());
     let adapter = pollster::block_on(instance.request_adapter(&Default::default())).unwrap();
     let (host_device, host_queue) =
         pollster::block_on(adapter.request_device(&Default::default())).unwrap();
@@ -225,8 +250,12 @@ fn texture(
 /// Rows of 13 Rgba32Float texels (208 bytes) and 37 R32Float texels
 /// (148 bytes) are not multiples of 256 bytes.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn texture_read_back_handles_row_padding() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let (width, height) = (37, 5);
     let values: Vec<f32> = (0..width * height).map(|i| i as f32).collect();
     let usage = wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::COPY_DST;
@@ -347,8 +376,12 @@ fn texture_read_back_handles_row_padding() {
 /// passes the depth test (query > 0: visible), one at ¾ does not. The
 /// points sit on pixel centres, inside the view volume (crates.md).
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn occlusion_queries_see_points_in_front_of_a_quad() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     let (size, depth_format) = (8, wgpu::TextureFormat::Depth32Float);
     let centre = (2.0 * 3.5) / size as f32 - 1.0;
     #[rustfmt::skip]
@@ -456,8 +489,12 @@ fn occlusion_queries_see_points_in_front_of_a_quad() {
 /// Read-backs from several threads at once: whichever thread's poll runs a
 /// mapping callback, every reader gets its own values.
 #[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
 fn concurrent_read_backs_each_arrive() {
-    let Some(ctx) = test_context() else { return };
+    let ctx = test_context();
     std::thread::scope(|s| {
         let readers: Vec<_> = (0..3u32)
             .map(|t| {
