@@ -220,8 +220,12 @@ impl Shading {
             normalize: normalize as u32,
             eye: eye.extend(1.0),
         };
-        ctx.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&block));
+        // Copied inside the encoder, not written to the queue: a
+        // `write_buffer` lands before the whole submission, so two shadings
+        // recorded into one encoder would both read the last eye.
+        let staging =
+            ctx.create_buffer_init("shade parameters", &[block], wgpu::BufferUsages::COPY_SRC);
+        encoder.copy_buffer_to_buffer(&staging, 0, &self.params, 0, size_of::<ShadeBlock>() as u64);
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.group, &[]);

@@ -624,6 +624,76 @@ fn recording_into_a_callers_encoder_matches_the_stages() {
     assert!(matches!(err, Err(Error::InvalidConfig { .. })));
 }
 
+/// Two shadings of a glossy scene toward two eyes recorded into one
+/// encoder, each copied out before the next: each equals the blocking
+/// shading toward its eye.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn two_shadings_recorded_into_one_encoder_keep_their_eyes() {
+    let ctx = test_context();
+    let ball = shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap();
+    let glossy = Brdf::phong(Vec3::splat(0.2), Vec3::splat(0.6), 8.0).unwrap();
+    let objects = vec![
+        Object {
+            mesh: Arc::new(ball),
+            material: glossy,
+        },
+        Object {
+            mesh: Arc::new(floor),
+            material: lambert(0.6),
+        },
+    ];
+    let scene = Scene::still("glossy", objects, camera()).unwrap();
+    let env = side_lit();
+    let eyes = [Vec3::new(3.0, 1.0, 0.0), Vec3::new(-1.0, 2.0, -3.0)];
+    let mut method = OcclusionQuery::new(Arc::clone(&ctx), Config::default()).unwrap();
+    method.prepare(&scene).unwrap();
+    method.relight(&env).unwrap();
+    method
+        .update(&scene.frame_geometry(0).unwrap(), scene.camera())
+        .unwrap();
+    let blocking: Vec<Vec<Vec3>> = eyes
+        .iter()
+        .map(|&eye| method.shade(eye).unwrap().flat().collect())
+        .collect();
+    let n = blocking[0].len();
+    let bytes = 16 * n as u64;
+    let copies: Vec<wgpu::Buffer> = eyes
+        .iter()
+        .map(|_| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("copy"),
+                size: bytes,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        })
+        .collect();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    for (&eye, copy) in eyes.iter().zip(&copies) {
+        let radiance = method.record_shade(eye, &mut encoder).unwrap().clone();
+        encoder.copy_buffer_to_buffer(&radiance, 0, copy, 0, bytes);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let mut differ = 0;
+    for ((copy, expected), other) in copies.iter().zip(&blocking).zip(blocking.iter().rev()) {
+        let recorded: Vec<[f32; 4]> = ctx.read_buffer(copy, 0, n).unwrap();
+        for ((r, e), o) in recorded.iter().zip(expected).zip(other) {
+            assert_eq!(Vec3::new(r[0], r[1], r[2]), *e);
+            differ += (e != o) as usize;
+        }
+    }
+    // The eyes see the glossy ball differently.
+    assert!(
+        differ > n / 4,
+        "{differ} of {n} vertices differ between the eyes"
+    );
+}
+
 #[test]
 #[cfg_attr(
     skip_gpu_tests,
