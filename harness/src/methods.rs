@@ -106,6 +106,19 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
 ];
 
+/// Checks that `name` names a method with valid settings without building
+/// it: no GPU device is opened.
+pub fn check(name: &str) -> Result<()> {
+    if name.starts_with("occlusion-query") {
+        occlusion_query_config(name).map(drop)
+    } else if name.starts_with("deferred-shadow") {
+        deferred_shadow_config(name).map(drop)
+    } else {
+        // The other families build on the CPU: the device is never opened.
+        by_name(name, &SharedGpu::new()).map(drop)
+    }
+}
+
 /// Builds a method from its name; GPU methods run on `gpu`'s device.
 pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
     if name.starts_with("occlusion-query") {
@@ -313,6 +326,7 @@ fn deferred_shadow_config(name: &str) -> Result<deferred_shadow::Config> {
             }
         }
     }
+    config.check()?;
     Ok(config)
 }
 
@@ -364,6 +378,35 @@ mod tests {
         }
     }
 
+    /// Names are checked without a device: typos and settings out of range
+    /// are configuration errors.
+    #[test]
+    fn bad_names_are_configuration_errors() {
+        for bad in [
+            "occlusion-query:k=100",
+            "occlusion-query:map=x",
+            "occlusion-query:fast",
+            "occlusion-queryx",
+            "deferred-shadow:q=0",
+            "deferred-shadow:map=x",
+            "deferred-shadow:fast",
+            "hemi-raster:mask=24",
+            "hemi-raster:table=63",
+            "hemi-raster:order=0",
+            "hemi-raster:reach=300",
+            "hemi-raster:fast",
+            "hemi-rasterx",
+        ] {
+            let err = check(bad).unwrap_err();
+            assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");
+        }
+        assert!(check("raytrace:1").is_err() && check("raytrace:1:vertex").is_err());
+        assert!(check("hemi-raster:pvs:window=lanczos").is_ok());
+        assert!(check("deferred-shadow:q=8:window=hanning").is_ok());
+        let unknown = check("nonesuch").err().map(|e| e.to_string());
+        assert!(unknown.is_some_and(|e| e.contains("unshadowed")));
+    }
+
     #[test]
     #[cfg_attr(
         skip_gpu_tests,
@@ -387,24 +430,6 @@ mod tests {
                 .name(),
             "occlusion-query-k66-queries-filtered"
         );
-        for bad in [
-            "occlusion-query:k=100",
-            "occlusion-query:map=x",
-            "occlusion-query:fast",
-            "occlusion-queryx",
-            "deferred-shadow:q=0",
-            "deferred-shadow:map=x",
-            "deferred-shadow:fast",
-            "hemi-raster:mask=24",
-            "hemi-raster:table=63",
-            "hemi-raster:order=0",
-            "hemi-raster:reach=300",
-            "hemi-raster:fast",
-            "hemi-rasterx",
-        ] {
-            let err = by_name(bad).err().unwrap();
-            assert!(matches!(err, Error::InvalidConfig { .. }), "{bad}: {err}");
-        }
         for (method, name) in [
             ("hemi-raster:flat", "hemi-raster-flat"),
             ("hemi-raster:pvs", "hemi-raster-pvs"),
@@ -417,13 +442,9 @@ mod tests {
         ] {
             assert_eq!(by_name(method).unwrap().name(), name);
         }
-        assert!(by_name("raytrace:1").is_err());
-        assert!(by_name("raytrace:1:vertex").is_err());
         assert_eq!(
             by_name("raytrace:8:vertex").unwrap().name(),
             "raytrace-8-vertex"
         );
-        let unknown = by_name("nonesuch").err().map(|e| e.to_string());
-        assert!(unknown.is_some_and(|e| e.contains("unshadowed")));
     }
 }

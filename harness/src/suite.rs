@@ -165,7 +165,17 @@ impl Suite {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::methods::{SharedGpu, by_name};
+    use crate::methods::{SharedGpu, by_name, check};
+
+    /// Every name of every suite parses, without a device.
+    #[test]
+    fn every_method_of_every_suite_is_a_valid_name() {
+        for family in Suite::Full.families() {
+            for method in &family.methods {
+                assert!(check(method).is_ok(), "{method}: {:?}", check(method));
+            }
+        }
+    }
 
     #[test]
     #[cfg_attr(
