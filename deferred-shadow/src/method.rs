@@ -497,24 +497,10 @@ fn rigid(name: &str, t: Affine3A) -> Result<(Affine3A, Mat3)> {
     Ok((t, Mat3::from_quat(rotation)))
 }
 
-/// How object `name` shades, if [`Brdf::lambert`] or [`Brdf::phong`]
-/// would have built its material (the variants' fields are public, so a
-/// scene may hold others: a negative or NaN exponent has no Phong lobe to
-/// expand, eq. 12).
+/// How object `name` shades: a glossy material with its Phong lobe's
+/// zonal expansion (eq. 12), which every exponent a scene accepts has.
 fn shading_of(name: &str, material: Brdf) -> Result<Shading> {
     let refused = |what: String| Error::InvalidScene(format!("{NAME}: object {name}: {what}"));
-    let checked = match material {
-        Brdf::Lambert { albedo } => Brdf::lambert(albedo),
-        Brdf::Phong {
-            diffuse,
-            specular,
-            exponent,
-        } => Brdf::phong(diffuse, specular, exponent),
-    };
-    checked.map_err(|e| match e {
-        Error::InvalidScene(what) => refused(what),
-        e => e,
-    })?;
     match material {
         Brdf::Phong {
             diffuse,

@@ -4,6 +4,8 @@
 
 use std::sync::Arc;
 
+mod support;
+
 use deferred_shadow::{Config, DeferredShadow};
 use glam::{Vec3, Vec4};
 use shadow_core::{
@@ -11,6 +13,7 @@ use shadow_core::{
     gpu::{GpuContext, GpuStages, test_context},
     shapes,
 };
+use support::patchy;
 
 fn camera(eye: Vec3) -> Camera {
     Camera::new(eye, Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 0.8, 48, 32).unwrap()
@@ -31,22 +34,6 @@ fn ball_on_floor(material: Brdf) -> Scene {
         },
     ];
     Scene::still("ball on a floor", objects, camera(Vec3::new(0.0, 2.0, 3.0))).unwrap()
-}
-
-/// A bright patch above the +X horizon over a dim sky.
-fn patchy() -> Environment {
-    let (w, h) = (64, 32);
-    let texels = (0..w * h)
-        .map(|i| {
-            let (row, col) = (i / w, i % w);
-            if (8..14).contains(&row) && (2..10).contains(&col) {
-                Vec3::new(20.0, 18.0, 15.0)
-            } else {
-                Vec3::new(0.3, 0.4, 0.6)
-            }
-        })
-        .collect();
-    Environment::new("patchy", w, h, texels).unwrap()
 }
 
 fn run(method: &mut DeferredShadow, scene: &Scene, env: &Environment) -> shadow_core::Result<()> {

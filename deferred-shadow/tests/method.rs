@@ -4,12 +4,15 @@
 use std::sync::Arc;
 
 use approx::assert_relative_eq;
+mod support;
+
 use deferred_shadow::{Config, DeferredShadow};
 use glam::{Affine3A, Quat, Vec3};
 use shadow_core::{
     Brdf, Camera, Environment, Error, Frame, Object, Pose, Scene, ShadowMethod, Stage,
     gpu::test_context, raster::clip_from_world, shapes,
 };
+use support::patchy;
 
 fn white() -> Brdf {
     Brdf::lambert(Vec3::splat(0.8)).unwrap()
@@ -117,22 +120,6 @@ fn a_ball_shades_the_floor_under_it() {
     assert!(far > 0.7, "{far}");
     let image = method.render(scene.camera()).unwrap();
     assert!(image.covered.iter().filter(|c| **c).count() > 1000);
-}
-
-/// An environment with a bright patch above the +X horizon over a dim sky.
-fn patchy() -> Environment {
-    let (w, h) = (64, 32);
-    let texels = (0..w * h)
-        .map(|i| {
-            let (row, col) = (i / w, i % w);
-            if (8..14).contains(&row) && (2..10).contains(&col) {
-                Vec3::new(20.0, 18.0, 15.0)
-            } else {
-                Vec3::new(0.3, 0.4, 0.6)
-            }
-        })
-        .collect();
-    Environment::new("patchy", w, h, texels).unwrap()
 }
 
 /// A cup: turned, open at the top, so that it shadows its own inside.
@@ -451,40 +438,6 @@ fn kept_maps_match_redrawn_ones() {
     let expected = fresh.render(scene.camera()).unwrap();
     for (a, b) in image.pixels.iter().zip(&expected.pixels) {
         assert_relative_eq!(*a, *b, epsilon = 1e-5);
-    }
-}
-
-/// A Phong material built by hand, past `Brdf::phong`'s checks, with an
-/// exponent the lobe's zonal expansion has no value for: refused when the
-/// scene is prepared, naming the object, not a panic when it is lit.
-#[test]
-#[cfg_attr(
-    skip_gpu_tests,
-    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
-)]
-fn a_hand_built_phong_exponent_out_of_range_is_refused() {
-    let ctx = test_context();
-    let ball = Arc::new(shapes::uv_sphere("ball", Vec3::ZERO, 0.5, 8, 16).unwrap());
-    for exponent in [-1.0, f32::NAN, f32::INFINITY] {
-        let material = Brdf::Phong {
-            diffuse: Vec3::splat(0.3),
-            specular: Vec3::splat(0.5),
-            exponent,
-        };
-        let objects = vec![Object {
-            mesh: Arc::clone(&ball),
-            material,
-        }];
-        let scene = Scene::still("hand-built", objects, camera()).unwrap();
-        let mut method = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
-        let result = method
-            .prepare(&scene)
-            .and_then(|()| method.relight(&Environment::uniform(Vec3::ONE)))
-            .and_then(|()| method.update(&scene.frame_geometry(0)?, scene.camera()));
-        assert!(
-            matches!(&result, Err(Error::InvalidScene(what)) if what.contains("ball") && what.contains("exponent")),
-            "exponent {exponent}: {result:?}"
-        );
     }
 }
 

@@ -43,6 +43,14 @@ fn scene(meshes: Vec<Mesh>, rho: f32) -> Scene {
     Scene::still("test", objects, camera()).unwrap()
 }
 
+/// A floor and a ball hovering over it.
+fn floor_and_ball() -> Vec<Mesh> {
+    vec![
+        shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
+        shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
+    ]
+}
+
 fn level(s: u8) -> Level {
     Level::new(s).unwrap()
 }
@@ -297,11 +305,7 @@ fn queries_and_depth_compare_agree() {
 )]
 fn idle_refinement_reuses_every_coarser_level() {
     let ctx = test_context();
-    let meshes = vec![
-        shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
-        shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
-    ];
-    let scene = scene(meshes, 0.8);
+    let scene = scene(floor_and_ball(), 0.8);
     let env = Environment::uniform(Vec3::ONE);
     let frame = scene.frame_geometry(0).unwrap();
     let config = Config {
@@ -344,11 +348,7 @@ fn idle_refinement_reuses_every_coarser_level() {
 )]
 fn each_level_is_shaded_with_its_own_weights() {
     let ctx = test_context();
-    let meshes = vec![
-        shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
-        shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
-    ];
-    let scene = scene(meshes, 0.8);
+    let scene = scene(floor_and_ball(), 0.8);
     let env = side_lit();
     for weights in [Weights::Voronoi, Weights::Equal] {
         let alone = Config {
@@ -577,11 +577,7 @@ fn filtering_never_shows_an_unevaluated_vertex() {
 )]
 fn recording_into_a_callers_encoder_matches_the_stages() {
     let ctx = test_context();
-    let meshes = vec![
-        shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap(),
-        shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 8, 16).unwrap(),
-    ];
-    let scene = scene(meshes, 0.6);
+    let scene = scene(floor_and_ball(), 0.6);
     let env = side_lit();
     let (_, blocking) = shade(&ctx, Config::default(), &scene, &env);
     let host = Arc::new(GpuContext::from_device(

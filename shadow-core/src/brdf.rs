@@ -49,6 +49,21 @@ impl Brdf {
         })
     }
 
+    /// Fails as [`Brdf::lambert`] or [`Brdf::phong`] would have for these
+    /// values: the variants' fields are public, so a `Brdf` can be built
+    /// without them, and a NaN exponent would shade silently to NaN.
+    pub fn check(&self) -> Result<()> {
+        match *self {
+            Brdf::Lambert { albedo } => Brdf::lambert(albedo),
+            Brdf::Phong {
+                diffuse,
+                specular,
+                exponent,
+            } => Brdf::phong(diffuse, specular, exponent),
+        }
+        .map(drop)
+    }
+
     /// The diffuse albedo ρ (ρ_d for Phong).
     pub fn diffuse(&self) -> Vec3 {
         match *self {

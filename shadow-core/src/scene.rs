@@ -68,6 +68,18 @@ impl Scene {
         if frames.is_empty() {
             return Err(bad("no frames".into()));
         }
+        for (o, object) in objects.iter().enumerate() {
+            object.material.check().map_err(|e| {
+                bad(format!(
+                    "object {o} ({}): {}",
+                    object.mesh.name(),
+                    match e {
+                        Error::InvalidScene(what) => what,
+                        e => e.to_string(),
+                    }
+                ))
+            })?;
+        }
         for (f, frame) in frames.iter().enumerate() {
             if frame.poses.len() != objects.len() {
                 return Err(bad(format!(
@@ -297,6 +309,35 @@ mod tests {
         assert_relative_eq!(g.objects[0].positions()[0], Vec3::new(0.0, 2.0, 0.0));
         assert_relative_eq!(g.objects[0].normals()[0], Vec3::Z, epsilon = 1e-6);
         assert!(!scene.deforms());
+    }
+
+    /// Materials built by hand past the BRDF constructors' checks are
+    /// refused by the scene, naming the object: no method sees them.
+    #[test]
+    fn hand_built_materials_out_of_range_are_refused() {
+        let phong = |exponent| Brdf::Phong {
+            diffuse: Vec3::splat(0.3),
+            specular: Vec3::splat(0.5),
+            exponent,
+        };
+        let materials = [
+            phong(-1.0),
+            phong(f32::NAN),
+            phong(f32::INFINITY),
+            Brdf::Lambert {
+                albedo: Vec3::splat(1.5),
+            },
+        ];
+        for material in materials {
+            let object = Object {
+                mesh: triangle(),
+                material,
+            };
+            let msg = Scene::still("s", vec![object], camera())
+                .unwrap_err()
+                .to_string();
+            assert!(msg.contains("object 0 (tri)"), "{material:?}: {msg}");
+        }
     }
 
     #[test]

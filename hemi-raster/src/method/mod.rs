@@ -220,25 +220,6 @@ impl HemiRaster {
     }
 }
 
-/// Accepts the material of object `index` if [`Brdf::lambert`] or
-/// [`Brdf::phong`] would have built it: the variants' fields are public, so
-/// a scene may hold others, and a NaN exponent would shade silently to NaN.
-fn check_material(index: usize, material: &Brdf) -> Result<()> {
-    match *material {
-        Brdf::Lambert { albedo } => Brdf::lambert(albedo),
-        Brdf::Phong {
-            diffuse,
-            specular,
-            exponent,
-        } => Brdf::phong(diffuse, specular, exponent),
-    }
-    .map(drop)
-    .map_err(|e| match e {
-        Error::InvalidScene(what) => Error::InvalidScene(format!("{NAME}: object {index}: {what}")),
-        e => e,
-    })
-}
-
 /// The name [`ShadowMethod::name`] documents, of `config`.
 fn name_of(config: &Config) -> String {
     // With visible sets, the hierarchy is named against the preset's.
@@ -351,9 +332,6 @@ impl ShadowMethod for HemiRaster {
     /// blocker lists.
     fn prepare(&mut self, scene: &Scene) -> Result<()> {
         self.capabilities().check(NAME, scene)?;
-        for (i, object) in scene.objects().iter().enumerate() {
-            check_material(i, &object.material)?;
-        }
         if self.engine.is_none() {
             self.engine = Some(Engine::new(&self.config)?);
         }
