@@ -185,8 +185,9 @@ impl Lighting {
     /// maps narrower than 128 texels as the area lights split them: over
     /// the 16 × 8 texels of [`Environment::uniform`] alone the rule is off
     /// the identity by 0.047, split by 6.0e-4.
+    ///
     /// `window` scales the bands of the diffuse projection here, and those
-    /// of each glossy vertex's lit transfer in [`glossy`].
+    /// of each glossy vertex's lit transfer (eq. 12).
     pub fn new(environment: &Environment, window: Window) -> Lighting {
         let sh = window.apply(&project_environment(environment, DIFFUSE_ORDER));
         let env = if environment.width() > MATRIX_WIDTH {
