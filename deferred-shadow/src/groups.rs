@@ -1,7 +1,8 @@
 //! Occluder groups (§4.2.3): objects near each other cast through one
 //! occlusion map.
 
-use shadow_core::{Aabb, Error, Result};
+use glam::{Affine3A, Vec3};
+use shadow_core::{Aabb, Error, Pose, Result, Scene};
 
 use crate::config::Grouping;
 
@@ -14,7 +15,38 @@ pub struct Groups {
     pub members: Vec<Vec<usize>>,
 }
 
+/// The box holding the eight corners of `model` turned by `t`: an object's
+/// bounds in the world as the method groups and plans with them.
+pub(crate) fn posed_bounds(model: Aabb, t: &Affine3A) -> Aabb {
+    Aabb::from_points((0..8).map(|c| {
+        t.transform_point3(Vec3::new(
+            if c & 1 == 0 { model.min.x } else { model.max.x },
+            if c & 2 == 0 { model.min.y } else { model.max.y },
+            if c & 4 == 0 { model.min.z } else { model.max.z },
+        ))
+    }))
+}
+
 impl Groups {
+    /// The groups [`crate::DeferredShadow`] forms for `scene`: each object's
+    /// mesh bounds posed at the first frame (the box of its eight corners
+    /// turned by the pose), grouped by `grouping`. A deformed object (which the method refuses) counts with
+    /// the bounds of its posed vertices.
+    pub fn of_scene(grouping: &Grouping, scene: &Scene) -> Result<Groups> {
+        let frame = scene.frame_geometry(0)?;
+        let boxes: Vec<Aabb> = scene
+            .objects()
+            .iter()
+            .zip(&scene.frames()[0].poses)
+            .zip(&frame.objects)
+            .map(|((object, pose), posed)| match pose {
+                Pose::Rigid(t) => posed_bounds(object.mesh.bounds(), t),
+                Pose::Deformed { .. } => posed.bounds(),
+            })
+            .collect();
+        Groups::new(grouping, &boxes)
+    }
+
     /// Groups the objects whose bounds are `boxes` by `grouping`.
     pub fn new(grouping: &Grouping, boxes: &[Aabb]) -> Result<Groups> {
         let n = boxes.len();

@@ -15,7 +15,7 @@ use shadow_core::{
 
 use crate::config::Config;
 use crate::gpu::{Geometry, Gpu, GpuObject};
-use crate::groups::Groups;
+use crate::groups::{Groups, posed_bounds};
 use crate::lights::{AreaLight, decompose};
 use crate::maps::{GpuLight, Plan};
 use crate::transfer::{
@@ -541,16 +541,7 @@ fn world_bounds(parts: &[Part], transforms: &[Affine3A]) -> Vec<Aabb> {
     parts
         .iter()
         .zip(transforms)
-        .map(|(part, t)| {
-            let b = part.bounds;
-            Aabb::from_points((0..8).map(|c| {
-                t.transform_point3(Vec3::new(
-                    if c & 1 == 0 { b.min.x } else { b.max.x },
-                    if c & 2 == 0 { b.min.y } else { b.max.y },
-                    if c & 4 == 0 { b.min.z } else { b.max.z },
-                ))
-            }))
-        })
+        .map(|(part, t)| posed_bounds(part.bounds, t))
         .collect()
 }
 
@@ -628,7 +619,7 @@ impl ShadowMethod for DeferredShadow {
         let start = Instant::now();
         let frame = scene.frame_geometry(0)?;
         let transforms: Vec<Affine3A> = Self::poses_of(&frame)?.into_iter().map(|p| p.0).collect();
-        let groups = Groups::new(&self.config.grouping, &world_bounds(&parts, &transforms))?;
+        let groups = Groups::of_scene(&self.config.grouping, scene)?;
         let geometry = Geometry::new(parts.iter().map(|p| &*p.mesh));
         let objects: Vec<GpuObject> = parts
             .iter()

@@ -56,7 +56,7 @@ pub enum Normalization {
 ///   32-bit float, whose step is 2^(e − 23) for a triangle whose largest
 ///   depth has exponent e (Vulkan's rule): 6·10⁻⁸ to 1.2·10⁻⁷ of the depth
 ///   range over its far half, about the step of the paper's 24-bit buffer
-///   (6·10⁻⁸). A unit is millionths of a texel: it matters only where the
+///   (6·10⁻⁸). A unit is 10⁻⁵ to 10⁻⁴ of a texel: it matters only where the
 ///   slope term is zero.
 /// * `receiver_slope`: the tested vertex moves toward the light by this many
 ///   texels times its own tan θ (tan θ at most [`DepthOffset::MAX_TAN`]):

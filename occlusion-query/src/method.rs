@@ -753,6 +753,12 @@ impl ShadowMethod for OcclusionQuery {
     }
 }
 
+/// Recording into a host's encoder: the shading's parameters (the eye) are
+/// copied inside the encoder, so several shadings recorded into one encoder
+/// each read their own; the uploads of an update (geometry, vertex lists,
+/// map views) and of the lighting (incoming radiance, weights) are written
+/// to the queue and land before the whole submission, so record at most one
+/// update and one relight per submission, before the shadings.
 impl GpuStages for OcclusionQuery {
     fn context(&self) -> &Arc<GpuContext> {
         &self.ctx

@@ -6,13 +6,14 @@
 //!
 //! obvhs 0.4's traversal skips every child box that a ray leaves before
 //! t = 10⁻⁴ (an absolute distance, `cwbvh::node::EPSILON`, where the ray's
-//! own `tmin` was meant): a blocker within 0.1 mm of a ray's origin is
-//! never found. On a scene 1 mm across that is a tenth of the scene, and
+//! own `tmin` was meant): a blocker whose box the ray leaves within 0.1 mm
+//! of its origin is missed. On a scene 1 mm across that is a tenth of the
+//! scene, and
 //! rays from a sphere resting on a floor went through the floor. The BVH is
 //! therefore built in a space where every frame is the same size
 //! ([`SceneBvh::SIZE`] across, about its centre, by a power of two so that
-//! the scaling is exact): the skipped distance is then 2.4·10⁻⁸ of the
-//! frame's diagonal whatever its size, far below the lift of ray origins
+//! the scaling is exact): the skipped distance is then 2·10⁻⁸ to 4·10⁻⁸
+//! of the frame's diagonal whatever its size, far below the lift of ray origins
 //! ([`Aabb::ray_offset`], 10⁻⁴ of it). Queries take and return world units.
 
 use std::time::Duration;
@@ -68,15 +69,17 @@ impl SceneBvh {
     pub fn build(frame: &FrameGeometry) -> Result<SceneBvh> {
         let bounds = frame.bounds();
         let centre = Vec3A::from(bounds.center());
-        // A power of two: the scaling adds no rounding.
-        let scale = (SceneBvh::SIZE / bounds.diagonal().max(f32::MIN_POSITIVE))
-            .log2()
-            .round()
-            .exp2();
+        // A power of two: the scaling adds no rounding. A frame of no extent
+        // (one point) needs none.
+        let diagonal = bounds.diagonal();
+        let scale = if diagonal > 0.0 {
+            (SceneBvh::SIZE / diagonal).log2().round().exp2()
+        } else {
+            1.0
+        };
         if !(scale.is_finite() && scale > 0.0) {
             return Err(Error::InvalidScene(format!(
-                "a frame {} across cannot be traced in f32",
-                bounds.diagonal()
+                "a frame {diagonal} across cannot be traced in f32"
             )));
         }
         let to_bvh = |p: Vec3| (Vec3A::from(p) - centre) * scale;

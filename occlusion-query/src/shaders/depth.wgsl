@@ -4,7 +4,7 @@
 struct Direction {
     // Clip space of the direction's depth map.
     clip_from_world: mat4x4<f32>,
-    // Toward the light (xyz), and the solid angle it stands for (w).
+    // Toward the light (xyz); w is padding.
     light: vec4<f32>,
 }
 
