@@ -6,7 +6,7 @@
 //! gradient, or a sun disc 8° to 20° in radius 400 times brighter than the
 //! dim sky around it.
 //!
-//! One method of each family runs on every scene, stage by stage, against a
+//! A method or two of each family runs on every scene, stage by stage, against a
 //! cheap reference (`ReferenceSettings::replicated(16, 2, seed)`), and on
 //! every frame must
 //!
@@ -70,7 +70,8 @@
 //! tails, and batches of fresh scenes kept finding larger ones (their seeds
 //! are in docs/measurements.md), while under smooth light only a grouped
 //! scene did. A method returning too little still fails on the smooth
-//! scenes, which every method runs. The fixed seeds the test runs pass;
+//! scenes, which every method runs but for the deforming ones
+//! `deferred-shadow` refuses. The fixed seeds the test runs pass;
 //! other seeds may find further cases under the sun: findings about the
 //! methods, to be recorded with their seeds.
 //!
@@ -84,9 +85,9 @@
 //! | | smooth | glossy | 0.1 | 0.07 (0.031, 0xc23ed94a7c895759) | 0.47 (0.235, 0xd02b205dba197462) | 0.25 (0.048) |
 //! | | sun | Lambert | 0.5 | 1.0 (0.50, 0x27df640661809db8; otherwise 0.177) | none (0.744, 0x80189cef40fdcfa0) | none (0.251, 0x511f7dead2183cab) |
 //! | | sun | glossy | 1 | 0.08 (0.039, 0x42dcb42d1add2976) | none (0.703, 0xe72b9f19c7d4d2b9) | none (0.292, 0xdbd560695ffacfd8) |
-//! | `deferred-shadow:q=8` | smooth | Lambert | 0.25 | 0.02 (never above `B`) | 1.1 (0.526, 0x0acee8d0916014a4; grouped 3.70, 0x349fd861dfb2f4c2) | 0.43 (0.227, 0x1f278ffe46bc45db) |
-//! | | smooth | glossy | 0.25 | 0.05 (0.021, 0x0d0316fb88c24b5f) | 1.4 (0.694, 0xf3678df7824a66cd; grouped 4.87, 0xd02b205dba197462) | 0.45 (0.241, 0x22bc7e91f6747f32) |
-//! | | sun | Lambert | 0.5 | 0.04 (0.016, 0x268567dcc97af44a) | none (0.866, 0x5c13f5d24388cf73; grouped 2.84, 0x4134b92d6e5f5591) | none (0.430, 0x832af024e5da7bb0) |
+//! | `deferred-shadow:q=8` | smooth | Lambert | 0.25 | 0.02 (never above `B`) | 0.87 (0.432, 0x1f278ffe46bc45db; grouped 3.70, 0x349fd861dfb2f4c2) | 0.43 (0.227, 0x1f278ffe46bc45db) |
+//! | | smooth | glossy | 0.25 | 0.05 (0.021, 0x0d0316fb88c24b5f) | 0.82 (0.407, 0x53af97cc2e9f1323; grouped 4.87, 0xd02b205dba197462) | 0.45 (0.241, 0x22bc7e91f6747f32) |
+//! | | sun | Lambert | 0.5 | 0.04 (0.016, 0x268567dcc97af44a) | none (0.515, 0x63811a0e0a3a23aa; grouped 2.84, 0x4134b92d6e5f5591) | none (0.430, 0x832af024e5da7bb0) |
 //! | | sun | glossy | 2 | 1.0 (0.50, 0xb0831c0dc4ca7063; 0.220 in the 3200) | none (2.98, 0xe72b9f19c7d4d2b9; grouped 5.17, 0xa301f08750b2efb6) | none (0.411, 0x1a75e2932ba21701) |
 //! | `raytrace:4` | smooth | Lambert | 0.5 | 0.02 (never above `B`) | 0.54 (0.266) | 0.26 (0.052) |
 //! | | smooth | glossy | 2 | 0.02 (never above `B`) | 0.97 (0.481, 0x8ac81f853b13d12c) | 0.31 (0.101) |
@@ -101,7 +102,7 @@
 //!   form one occluder group, whose members cast nothing on each other,
 //!   and the enclosed ones get the unoccluded light, 13 times the
 //!   reference on that sphere, an error with no bound as the reference
-//!   goes dark. On such scenes (grouped: 1224 of its 3581 frames) its
+//!   goes dark. On such scenes (grouped: 1341 of its 3581 frames) its
 //!   error is not bounded; its upper bound and darkness are.
 //! * `occlusion-query`'s 87% is the same scene: the enclosed sphere got 3.3
 //!   times its reference light; `hemi-raster` 3.7% there.
@@ -200,8 +201,8 @@ fn tolerance(method: &str, light: Light, glossy: bool) -> Tolerance {
         (Family::Directions, false, true) => (0.1, 0.07, 0.47, 0.25),
         (Family::Directions, true, false) => (0.5, 1.0, f32::INFINITY, f32::INFINITY),
         (Family::Directions, true, true) => (1.0, 0.08, f32::INFINITY, f32::INFINITY),
-        (Family::AreaLights, false, false) => (0.25, 0.02, 1.1, 0.43),
-        (Family::AreaLights, false, true) => (0.25, 0.05, 1.4, 0.45),
+        (Family::AreaLights, false, false) => (0.25, 0.02, 0.87, 0.43),
+        (Family::AreaLights, false, true) => (0.25, 0.05, 0.82, 0.45),
         (Family::AreaLights, true, false) => (0.5, 0.04, f32::INFINITY, f32::INFINITY),
         (Family::AreaLights, true, true) => (2.0, 1.0, f32::INFINITY, f32::INFINITY),
         (Family::MonteCarlo, false, false) => (0.5, 0.02, 0.54, 0.26),
@@ -581,14 +582,11 @@ fn check_frame(
 }
 
 /// Whether `deferred-shadow` puts two of the scene's objects in one
-/// occluder group (their bounds at the first frame overlap by more than
-/// half the smaller's), which cast nothing on each other: its error is not
-/// bounded there.
+/// occluder group, whose members cast nothing on each other: its error is
+/// not bounded there.
 fn grouped(scene: &Scene) -> bool {
-    let frame = scene.frame_geometry(0).expect("a valid first frame");
-    let boxes: Vec<shadow_core::Aabb> = frame.objects.iter().map(|o| o.bounds()).collect();
     let grouping = deferred_shadow::Config::default().grouping;
-    let groups = deferred_shadow::Groups::new(&grouping, &boxes).expect("overlap groups");
+    let groups = deferred_shadow::Groups::of_scene(&grouping, scene).expect("overlap groups");
     groups.members.iter().any(|members| members.len() > 1)
 }
 
@@ -734,7 +732,13 @@ fn the_checks_refuse_a_method_that_returns_nothing() {
         reference::scene_references(scene, environment, &settings, None, &bar).unwrap();
     let cpu = SharedGpu::new();
     let mut unshadowed = methods::by_name("unshadowed", &cpu).unwrap();
-    let bound = shade_frames(unshadowed.as_mut(), scene, environment).unwrap();
+    let unshadowed = shade_frames(unshadowed.as_mut(), scene, environment).unwrap();
+    let bound: Vec<Vec<Vec3>> = unshadowed[0]
+        .radiance
+        .iter()
+        .zip(&references[0].radiance.radiance)
+        .map(|(u, r)| u.iter().zip(r).map(|(u, r)| u.max(*r)).collect())
+        .collect();
     let glossy = scene.objects().iter().any(|o| o.material.is_glossy());
     for name in METHODS {
         let tolerance = tolerance(name, case.light, glossy);
@@ -749,13 +753,7 @@ fn the_checks_refuse_a_method_that_returns_nothing() {
             evaluated: None,
         };
         let check = |shading: &VertexRadiance| {
-            check_frame(
-                &tolerance,
-                &case,
-                shading,
-                &bound[0].radiance,
-                &references[0],
-            )
+            check_frame(&tolerance, &case, shading, &bound, &references[0])
         };
         assert!(check(&scaled(1.0)).is_ok(), "{name}: the reference itself");
         assert!(check(&scaled(0.0)).is_err(), "{name}: nothing");
