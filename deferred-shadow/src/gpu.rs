@@ -695,8 +695,8 @@ impl Gpu {
     /// and ranges and lays its maps out in atlas batches. `masks` are the
     /// plan's ([`Plan::masks`]), `groups[o]` is the group of object o and
     /// `reuse[k]` the index in the previous plan of map k when it is kept.
-    /// Refuses a plan the device cannot hold ([`Gpu::check_plan`]) before
-    /// anything changes.
+    /// The plan must fit the device: [`Gpu::check_plan`], which the method
+    /// runs before it computes the masks.
     pub fn set_plan(
         &mut self,
         plan: &Plan,
@@ -704,7 +704,6 @@ impl Gpu {
         groups: &[u32],
         reuse: &[Option<u32>],
     ) -> Result<()> {
-        self.check_plan(plan)?;
         let ctx = Arc::clone(&self.ctx);
         ctx.capture("deferred-shadow: occlusion map plan", || {
             self.lay_out(plan, masks, groups, reuse);
@@ -712,7 +711,7 @@ impl Gpu {
         })
     }
 
-    /// [`Gpu::set_plan`] once the plan is known to fit.
+    /// [`Gpu::set_plan`]'s work.
     fn lay_out(&mut self, plan: &Plan, masks: &[u32], groups: &[u32], reuse: &[Option<u32>]) {
         let n = self.resolution;
         let limit = self

@@ -30,18 +30,16 @@ pub(crate) fn posed_bounds(model: Aabb, t: &Affine3A) -> Aabb {
 impl Groups {
     /// The groups [`crate::DeferredShadow`] forms for `scene`: each object's
     /// mesh bounds posed at the first frame (the box of its eight corners
-    /// turned by the pose), grouped by `grouping`. A deformed object (which the method refuses) counts with
-    /// the bounds of its posed vertices.
+    /// turned by the pose), grouped by `grouping`. A deformed object (which
+    /// the method refuses) counts with the bounds of its posed vertices.
     pub fn of_scene(grouping: &Grouping, scene: &Scene) -> Result<Groups> {
-        let frame = scene.frame_geometry(0)?;
         let boxes: Vec<Aabb> = scene
             .objects()
             .iter()
             .zip(&scene.frames()[0].poses)
-            .zip(&frame.objects)
-            .map(|((object, pose), posed)| match pose {
+            .map(|(object, pose)| match pose {
                 Pose::Rigid(t) => posed_bounds(object.mesh.bounds(), t),
-                Pose::Deformed { .. } => posed.bounds(),
+                Pose::Deformed { positions, .. } => Aabb::from_points(positions.iter().copied()),
             })
             .collect();
         Groups::new(grouping, &boxes)

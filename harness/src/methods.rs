@@ -106,32 +106,44 @@ pub const METHODS: &[(&str, &str)] = &[
     ),
 ];
 
+/// What a method's name sets, read without building it: the GPU methods'
+/// configurations (built later on a device), or a CPU method already built.
+enum Parsed {
+    OcclusionQuery(occlusion_query::Config),
+    DeferredShadow(deferred_shadow::Config),
+    Cpu(Box<dyn ShadowMethod>),
+}
+
 /// Checks that `name` names a method with valid settings without building
 /// it: no GPU device is opened.
 pub fn check(name: &str) -> Result<()> {
-    if name.starts_with("occlusion-query") {
-        occlusion_query_config(name).map(drop)
-    } else if name.starts_with("deferred-shadow") {
-        deferred_shadow_config(name).map(drop)
-    } else {
-        // The other families build on the CPU: the device is never opened.
-        by_name(name, &SharedGpu::new()).map(drop)
-    }
+    parse(name).map(drop)
 }
 
 /// Builds a method from its name; GPU methods run on `gpu`'s device.
 pub fn by_name(name: &str, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
+    Ok(match parse(name)? {
+        Parsed::OcclusionQuery(config) => Box::new(OcclusionQuery::new(gpu.get()?, config)?),
+        Parsed::DeferredShadow(config) => {
+            Box::new(deferred_shadow::DeferredShadow::new(gpu.get()?, config)?)
+        }
+        Parsed::Cpu(method) => method,
+    })
+}
+
+/// The family and settings `name` gives.
+fn parse(name: &str) -> Result<Parsed> {
     if name.starts_with("occlusion-query") {
-        let config = occlusion_query_config(name)?;
-        return Ok(Box::new(OcclusionQuery::new(gpu.get()?, config)?));
+        return occlusion_query_config(name).map(Parsed::OcclusionQuery);
     }
     if name.starts_with("deferred-shadow") {
-        let config = deferred_shadow_config(name)?;
-        return Ok(Box::new(deferred_shadow::DeferredShadow::new(
-            gpu.get()?,
-            config,
-        )?));
+        return deferred_shadow_config(name).map(Parsed::DeferredShadow);
     }
+    cpu_method(name).map(Parsed::Cpu)
+}
+
+/// A method that runs on the CPU, from its name.
+fn cpu_method(name: &str) -> Result<Box<dyn ShadowMethod>> {
     if name == "unshadowed" {
         let order = ShOrder::new(9).expect("9 is a valid SH order");
         return Ok(Box::new(Unshadowed::new(order)));
@@ -177,6 +189,16 @@ fn options<'a>(name: &'a str, family: &str) -> Result<std::str::Split<'a, char>>
         return Err(Error::config(name, "options follow the name after ':'"));
     }
     Ok(options)
+}
+
+/// The SH window `value` of option `window=` of method `name`.
+fn window(name: &str, value: &str) -> Result<shadow_core::sh::Window> {
+    shadow_core::sh::Window::from_name(value).ok_or_else(|| {
+        Error::config(
+            name,
+            format!("window={value}: windows are none, hanning, lanczos"),
+        )
+    })
 }
 
 /// The value of `option` of method `name` as a whole number.
@@ -266,10 +288,7 @@ pub fn hemi_raster_config(name: &str) -> Result<hemi_raster::Config> {
             }
             None if option == "paper" => config.integration = Integration::ShBlocks,
             None if option == "direct" => config.integration = Integration::Direct,
-            Some(("window", w)) => match shadow_core::sh::Window::from_name(w) {
-                Some(window) => config.window = window,
-                None => return bad(format!("window={w}: windows are none, hanning, lanczos")),
-            },
+            Some(("window", w)) => config.window = window(name, w)?,
             Some(("mask", n)) => {
                 config.mask_resolution = match number(n)? {
                     16 => MaskResolution::R16,
@@ -312,10 +331,7 @@ fn deferred_shadow_config(name: &str) -> Result<deferred_shadow::Config> {
         let number = |value| whole(name, option, value);
         match option.split_once('=') {
             None if option == "uncorrected" => config.self_visibility = false,
-            Some(("window", w)) => match shadow_core::sh::Window::from_name(w) {
-                Some(window) => config.window = window,
-                None => return bad(format!("window={w}: windows are none, hanning, lanczos")),
-            },
+            Some(("window", w)) => config.window = window(name, w)?,
             Some(("q", q)) => config.lights = number(q)? as usize,
             Some(("map", n)) => config.map_resolution = number(n)?,
             Some(("rays", n)) => config.rays = number(n)?,

@@ -456,7 +456,6 @@ impl OcclusionQuery {
         let texel = 2.0 * 1.01 * bounding_sphere(&points).1 / self.config.map_resolution as f32;
         let mut first = 0u32;
         let mut simplification = 0.0f32;
-        let mut in_triangle = Vec::new();
         for (o, object) in scene.objects().iter().enumerate() {
             let mesh = &object.mesh;
             triangles.extend(mesh.triangles().iter().flatten().map(|&v| v + first));
@@ -471,14 +470,11 @@ impl OcclusionQuery {
             let drawn = meshopt::optimize_vertex_cache(drawn.as_flattened(), mesh.vertex_count());
             occluders.extend(drawn.iter().map(|&v| v + first));
             objects.extend(std::iter::repeat_n(o as u32, mesh.vertex_count()));
-            let mut used = vec![false; mesh.vertex_count()];
-            for &v in mesh.triangles().iter().flatten() {
-                used[v as usize] = true;
-            }
-            in_triangle.extend(used);
             first += mesh.vertex_count() as u32;
         }
         let vertices = first as usize;
+        let every_triangle: Vec<u32> = (0..(triangles.len() / 3) as u32).collect();
+        let in_triangle = vertices_of(&every_triangle, &triangles, vertices);
         let zeros = vec![Vec4::ZERO; vertices];
         let ctx = &self.ctx;
         let k = self.finest().len();

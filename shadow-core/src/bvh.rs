@@ -8,13 +8,13 @@
 //! t = 10⁻⁴ (an absolute distance, `cwbvh::node::EPSILON`, where the ray's
 //! own `tmin` was meant): a blocker whose box the ray leaves within 0.1 mm
 //! of its origin is missed. On a scene 1 mm across that is a tenth of the
-//! scene, and
-//! rays from a sphere resting on a floor went through the floor. The BVH is
-//! therefore built in a space where every frame is the same size
-//! ([`SceneBvh::SIZE`] across, about its centre, by a power of two so that
-//! the scaling is exact): the skipped distance is then 2·10⁻⁸ to 4·10⁻⁸
-//! of the frame's diagonal whatever its size, far below the lift of ray origins
-//! ([`Aabb::ray_offset`], 10⁻⁴ of it). Queries take and return world units.
+//! scene, and rays from a sphere resting on a floor went through the
+//! floor. The BVH is therefore built in a space where every frame is the
+//! same size ([`SceneBvh::SIZE`] across, about its centre, by a power of
+//! two so that the scaling is exact): the skipped distance is then 2·10⁻⁸
+//! to 4·10⁻⁸ of the frame's diagonal whatever its size, far below the lift
+//! of ray origins ([`Aabb::ray_offset`], 10⁻⁴ of it). Queries take and
+//! return world units.
 
 use std::time::Duration;
 
@@ -49,28 +49,21 @@ pub struct SceneBvh {
     /// (object, triangle) of leaf slot i.
     ids: Vec<(u32, u32)>,
     bounds: Aabb,
-    /// World to BVH space: `(p − centre) · scale`.
+    space: Space,
+}
+
+/// World to BVH space: `(p − centre) · scale` (module docs, "Scale").
+#[derive(Clone, Copy, Debug)]
+struct Space {
     centre: Vec3A,
     scale: f32,
 }
 
-impl SceneBvh {
-    /// The diagonal of every frame in BVH space (module docs, "Scale"),
-    /// within a factor of two.
-    pub const SIZE: f32 = 4096.0;
-
-    /// From world to BVH space.
-    #[inline]
-    fn to_bvh(&self, p: Vec3) -> Vec3A {
-        (Vec3A::from(p) - self.centre) * self.scale
-    }
-
-    /// Builds the BVH of a frame. Fails on a frame without triangles.
-    pub fn build(frame: &FrameGeometry) -> Result<SceneBvh> {
-        let bounds = frame.bounds();
-        let centre = Vec3A::from(bounds.center());
-        // A power of two: the scaling adds no rounding. A frame of no extent
-        // (one point) needs none.
+impl Space {
+    /// The space where `bounds` are [`SceneBvh::SIZE`] across, within a
+    /// factor of two: the scale is a power of two, which adds no rounding.
+    /// A frame of no extent (one point) needs no scaling.
+    fn of(bounds: Aabb) -> Result<Space> {
         let diagonal = bounds.diagonal();
         let scale = if diagonal > 0.0 {
             (SceneBvh::SIZE / diagonal).log2().round().exp2()
@@ -82,16 +75,36 @@ impl SceneBvh {
                 "a frame {diagonal} across cannot be traced in f32"
             )));
         }
-        let to_bvh = |p: Vec3| (Vec3A::from(p) - centre) * scale;
+        Ok(Space {
+            centre: Vec3A::from(bounds.center()),
+            scale,
+        })
+    }
+
+    #[inline]
+    fn point(self, p: Vec3) -> Vec3A {
+        (Vec3A::from(p) - self.centre) * self.scale
+    }
+}
+
+impl SceneBvh {
+    /// The diagonal of every frame in BVH space (module docs, "Scale"),
+    /// within a factor of two.
+    pub const SIZE: f32 = 4096.0;
+
+    /// Builds the BVH of a frame. Fails on a frame without triangles.
+    pub fn build(frame: &FrameGeometry) -> Result<SceneBvh> {
+        let bounds = frame.bounds();
+        let space = Space::of(bounds)?;
         let mut tris = Vec::new();
         let mut ids = Vec::new();
         for (o, object) in frame.objects.iter().enumerate() {
             let p = object.positions();
             for (t, &[a, b, c]) in object.triangles().iter().enumerate() {
                 tris.push(Triangle {
-                    v0: to_bvh(p[a as usize]),
-                    v1: to_bvh(p[b as usize]),
-                    v2: to_bvh(p[c as usize]),
+                    v0: space.point(p[a as usize]),
+                    v1: space.point(p[b as usize]),
+                    v2: space.point(p[c as usize]),
                 });
                 ids.push((o as u32, t as u32));
             }
@@ -115,8 +128,7 @@ impl SceneBvh {
             triangles,
             ids,
             bounds,
-            centre,
-            scale,
+            space,
         })
     }
 
@@ -135,15 +147,20 @@ impl SceneBvh {
     /// [`SceneBvh::ray_offset`]).
     #[inline]
     pub fn unoccluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        let ray = Ray::new(self.to_bvh(origin), dir.into(), 0.0, t_max * self.scale);
+        let ray = Ray::new(
+            self.space.point(origin),
+            dir.into(),
+            0.0,
+            t_max * self.space.scale,
+        );
         self.bvh
             .ray_traverse_miss(ray, |ray, slot| self.triangles[slot].intersect(ray))
     }
 
     /// The closest hit along the ray, if any.
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
-        let origin = self.to_bvh(origin);
-        let ray = Ray::new(origin, dir.into(), 0.0, t_max * self.scale);
+        let origin = self.space.point(origin);
+        let ray = Ray::new(origin, dir.into(), 0.0, t_max * self.space.scale);
         let mut hit = RayHit::none();
         if !self.bvh.ray_traverse(ray, &mut hit, |ray, slot| {
             self.triangles[slot].intersect(ray)
@@ -158,7 +175,7 @@ impl SceneBvh {
         Some(Hit {
             object,
             triangle,
-            t: hit.t / self.scale,
+            t: hit.t / self.space.scale,
             barycentric: barycentric(point, v0, v1, v2),
         })
     }
@@ -293,6 +310,8 @@ mod tests {
     /// alike, and a blocker 0.05 mm in front of a ray's origin is found
     /// (obvhs alone skips boxes left within 0.1 mm: 161 of 193 rays from
     /// the lower half of a 0.2 mm sphere went through the floor under it).
+    /// Measured: the scaled distances within 4.1e-6 of the unit scene's,
+    /// the 0.05 mm one exact; 88 of the 2000 rays hit.
     #[test]
     fn answers_do_not_depend_on_the_scene_s_size() {
         let (frame, _) = soup(400);

@@ -46,8 +46,8 @@ pub const INSTALL_HINT: &str = "On Linux without a GPU install Mesa's software V
 
 /// The instance settings [`GpuContext::new`] opens adapters with: the
 /// primary backends (Vulkan, Metal, DirectX 12), or those `WGPU_BACKEND`
-/// names but OpenGL, and wgpu's other environment variables. A host that opens its own
-/// device for the methods can start from it.
+/// names but OpenGL, and wgpu's other environment variables. A host that
+/// opens its own device for the methods can start from it.
 pub fn instance_descriptor() -> wgpu::InstanceDescriptor {
     let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
     descriptor.backends = wgpu::Backends::PRIMARY;
