@@ -63,8 +63,9 @@ fn frame_per_method(c: &mut Criterion) {
             .families()
             .into_iter()
             .flat_map(|f| f.methods);
-        for name in settings {
-            let mut method = methods::by_name(name, &gpu).expect("registered method");
+        for spec in settings {
+            let name = spec.name();
+            let mut method = spec.build(&gpu).expect("the suite's methods build");
             if let Err(why) = method.capabilities().check(name, &scene) {
                 println!("{group_id}/{name}: not run ({why})");
                 continue;

@@ -11,6 +11,7 @@ mod groups;
 mod lights;
 mod maps;
 mod method;
+pub mod name;
 mod transfer;
 
 pub use config::{Config, Grouping, MAX_LIGHTS, MAX_MAP_RESOLUTION};

@@ -22,7 +22,7 @@ use crate::transfer::{
     DIFFUSE_ORDER, GLOSSY_ORDER, GlossyVertex, Lighting, Transfer, diffuse, export, glossy,
 };
 
-const NAME: &str = "deferred-shadow";
+use crate::name::NAME;
 
 /// Tamura, Johan and Nishita's deferred shadowing on wgpu.
 ///
@@ -125,27 +125,7 @@ impl DeferredShadow {
     /// The method on `ctx`'s device; fails on a configuration out of range.
     pub fn new(ctx: Arc<GpuContext>, config: Config) -> Result<DeferredShadow> {
         config.check()?;
-        // The name says what differs from the default.
-        let default = Config::default();
-        let mut name = NAME.to_string();
-        if config.lights != default.lights {
-            name += &format!("-q{}", config.lights);
-        }
-        if config.map_resolution != default.map_resolution {
-            name += &format!("-map{}", config.map_resolution);
-        }
-        if config.rays != default.rays {
-            name += &format!("-rays{}", config.rays);
-        }
-        if config.grouping != default.grouping {
-            name += "-grouped";
-        }
-        if !config.self_visibility {
-            name += "-uncorrected";
-        }
-        if config.window != default.window {
-            name += &format!("-{}", config.window.name());
-        }
+        let name = config.name();
         Ok(DeferredShadow {
             ctx,
             config,

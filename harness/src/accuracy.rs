@@ -1,4 +1,6 @@
-//! What each option of hemispherical rasterization costs in accuracy.
+//! What each option of a method costs in accuracy, by default each option
+//! of hemispherical rasterization ([`variants`]); any method that exports
+//! SH transfer gets the transfer error, any other the radiance error.
 //!
 //! Kautz, Lehtinen and Aila 2004 (§4, Table 1) score their method by the
 //! "average L2 error in V*": the relative L2 error of the SH transfer
@@ -17,11 +19,10 @@
 use std::{fmt::Write, path::Path};
 
 use glam::Vec3;
-use hemi_raster::{Config, HemiRaster, Integration};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shadow_core::{
-    Environment, Error, Export, Result, Scene,
+    Environment, Error, Export, Result, Scene, TransferSpace,
     sh::{self, ShOrder, ShRgb, Zonal},
     shading::lambert_transfer_radiance,
 };
@@ -29,11 +30,12 @@ use shadow_core::{
 use crate::{
     chart::{Axes, Point, speed_vs_error},
     io::{write_atomic, write_json_atomic},
+    methods::{MethodSpec, SharedGpu},
     reference::{
-        VertexReference,
+        ReferenceInfo, VertexReference,
         transfer::{TransferReference, TransferSettings, scene_transfer_references},
     },
-    report::{MachineInfo, ReferenceInfo},
+    report::MachineInfo,
     run::{self, References},
     score::{ErrorStats, against},
 };
@@ -42,7 +44,7 @@ use crate::{
 pub const CHART: &str = "accuracy.png";
 
 const AXES: Axes = Axes {
-    title: "hemi-raster options: time per frame against transfer error",
+    title: "time per frame against transfer error",
     error: "transfer error per vertex, Table 1's measure (%)",
     time: "update + shade per frame (ms)",
 };
@@ -51,80 +53,80 @@ const AXES: Axes = Axes {
 /// Fight (`human`), Cloth and Chess.
 pub const DEFAULT_SCENES: &[&str] = &["human", "cloth", "chess"];
 
-/// One hemi-raster configuration of the table.
-#[derive(Clone, Copy, Debug)]
+/// One method setting of the table.
+#[derive(Clone, Debug)]
 pub struct Variant {
-    /// The row's short name.
-    pub name: &'static str,
-    /// The method name its configuration is read from, as the report's
-    /// sweeps name it ([`crate::methods::hemi_raster_config`]).
-    pub method: &'static str,
-    pub what: &'static str,
+    pub spec: MethodSpec,
+    /// What the row shows; empty for a setting outside [`variants`].
+    pub what: String,
 }
 
 impl Variant {
-    /// The configuration [`Variant::method`] names.
-    pub fn config(&self) -> Result<Config> {
-        crate::methods::hemi_raster_config(self.method)
+    /// `spec`, with what it shows where [`variants`] lists it.
+    pub fn described(spec: MethodSpec) -> Variant {
+        let what = VARIANTS
+            .iter()
+            .find(|(listed, _)| *listed == spec.name())
+            .map_or(String::new(), |(_, what)| what.to_string());
+        Variant { spec, what }
     }
 }
 
-/// The default configuration (the paper's, every blocked pixel counted), then
-/// each option changed alone.
+/// The default rows: hemi-raster's default (the paper's, every blocked
+/// pixel counted), then each option changed alone.
+const VARIANTS: &[(&str, &str)] = &[
+    (
+        "hemi-raster",
+        "the default, the paper's but with every blocked pixel counted: 32×32 mask, 128² plane table, order 5, two-level hierarchy",
+    ),
+    (
+        "hemi-raster:flat",
+        "no hierarchy: every triangle at full resolution (Config::accurate)",
+    ),
+    (
+        "hemi-raster:reach=0",
+        "two-level, but full resolution over the two-ring only (near_reach 0)",
+    ),
+    (
+        "hemi-raster:reach=6",
+        "two-level with a near field of 6 coarse-triangle radii (Hierarchy::WIDE_NEAR_REACH) instead of 2",
+    ),
+    (
+        "hemi-raster:min=40",
+        "two-level, small objects simplified too (at least 40 coarse triangles, not 300)",
+    ),
+    (
+        "hemi-raster:pvs",
+        "two-level with a near field of 6 coarse-triangle radii and potentially visible sets built from the scored frames (§3.2, Config::fast)",
+    ),
+    (
+        "hemi-raster:pvs=2",
+        "the same with sets built from every other frame: half the scored frames unseen by the sets",
+    ),
+    ("hemi-raster:table=32", "32² plane table"),
+    ("hemi-raster:table=64", "64² plane table"),
+    ("hemi-raster:table=256", "256² plane table"),
+    ("hemi-raster:mask=16", "16×16 mask"),
+    ("hemi-raster:mask=64", "64×64 mask"),
+    (
+        "hemi-raster:paper",
+        "SH from the paper's 4×4-block downsample instead of every blocked pixel (Config::paper)",
+    ),
+    (
+        "hemi-raster:direct",
+        "no SH: the prefiltered environment summed over visible pixels (no transfer vector)",
+    ),
+];
+
+/// The default rows: hemi-raster and each of its options changed alone.
 pub fn variants() -> Vec<Variant> {
-    let with = |name, method, what| Variant { name, method, what };
-    vec![
-        with(
-            "default",
-            "hemi-raster",
-            "the default, the paper's but with every blocked pixel counted: 32×32 mask, 128² plane table, order 5, two-level hierarchy",
-        ),
-        with(
-            "flat",
-            "hemi-raster:flat",
-            "no hierarchy: every triangle at full resolution (Config::accurate)",
-        ),
-        with(
-            "rings-only",
-            "hemi-raster:reach=0",
-            "two-level, but full resolution over the two-ring only (near_reach 0)",
-        ),
-        with(
-            "reach-6",
-            "hemi-raster:reach=6",
-            "two-level with a near field of 6 coarse-triangle radii (Hierarchy::WIDE_NEAR_REACH) instead of 2",
-        ),
-        with(
-            "coarse-40",
-            "hemi-raster:min=40",
-            "two-level, small objects simplified too (at least 40 coarse triangles, not 300)",
-        ),
-        with(
-            "pvs",
-            "hemi-raster:pvs",
-            "two-level with a near field of 6 coarse-triangle radii and potentially visible sets built from the scored frames (§3.2, Config::fast)",
-        ),
-        with(
-            "pvs-half",
-            "hemi-raster:pvs=2",
-            "the same with sets built from every other frame: half the scored frames unseen by the sets",
-        ),
-        with("lut-32", "hemi-raster:table=32", "32² plane table"),
-        with("lut-64", "hemi-raster:table=64", "64² plane table"),
-        with("lut-256", "hemi-raster:table=256", "256² plane table"),
-        with("mask-16", "hemi-raster:mask=16", "16×16 mask"),
-        with("mask-64", "hemi-raster:mask=64", "64×64 mask"),
-        with(
-            "sh-blocks",
-            "hemi-raster:paper",
-            "SH from the paper's 4×4-block downsample instead of every blocked pixel (Config::paper)",
-        ),
-        with(
-            "direct",
-            "hemi-raster:direct",
-            "no SH: the prefiltered environment summed over visible pixels (no transfer vector)",
-        ),
-    ]
+    VARIANTS
+        .iter()
+        .map(|(name, _)| {
+            let spec = crate::methods::parse(name).expect("the listed names are valid");
+            Variant::described(spec)
+        })
+        .collect()
 }
 
 /// Vertices whose reference transfer vector is shorter than this fraction of
@@ -473,6 +475,7 @@ pub fn evaluate(
     radiance: &[VertexReference],
     radiance_info: ReferenceInfo,
     plan: &Plan,
+    gpu: &SharedGpu,
     progress: &ProgressBar,
 ) -> Result<SceneAccuracy> {
     let settings = &plan.transfer;
@@ -491,15 +494,6 @@ pub fn evaluate(
             o.mesh.name()
         )));
     }
-    for v in &plan.variants {
-        let order = v.config()?.order;
-        if order != settings.order {
-            return Err(Error::InvalidScene(format!(
-                "variant {} has SH {order}, the transfer reference {}",
-                v.name, settings.order
-            )));
-        }
-    }
     progress.set_message(format!("transfer reference {}", scene.name()));
     let references = scene_transfer_references(scene, settings, progress)?;
     let bounds = Bounds::new(scene, environment, settings);
@@ -510,9 +504,10 @@ pub fn evaluate(
     ];
     let mut skipped = Vec::new();
     for variant in &plan.variants {
-        progress.set_message(format!("{} {}", scene.name(), variant.name));
+        progress.set_message(format!("{} {}", scene.name(), variant.spec));
         match run_variant(
             variant,
+            gpu,
             scene,
             environment,
             radiance,
@@ -521,7 +516,7 @@ pub fn evaluate(
         ) {
             Ok(row) => rows.push(row),
             Err(e @ Error::Unsupported { .. }) => {
-                skipped.push((variant.name.to_string(), e.to_string()))
+                skipped.push((variant.spec.name().to_string(), e.to_string()))
             }
             Err(e) => return Err(e),
         }
@@ -629,24 +624,25 @@ impl Bounds {
     }
 }
 
-/// Runs one configuration over every frame through [`crate::run`]: radiance
-/// and (for the SH integrations) transfer error, and the time per frame.
+/// Runs one setting over every frame through [`crate::run`]: radiance
+/// error, the transfer error where the method exports world-space SH
+/// transfer of the reference's order, and the time per frame.
 fn run_variant(
     variant: &Variant,
+    gpu: &SharedGpu,
     scene: &Scene,
     environment: &Environment,
     radiance: &[VertexReference],
     references: &[TransferReference],
     repeats: usize,
 ) -> Result<Row> {
-    let config = variant.config()?;
-    let mut method = HemiRaster::new(config);
-    let n = config.order.coeff_count();
-    let has_transfer = config.integration != Integration::Direct;
+    let mut method = variant.spec.build(gpu)?;
+    let order = references.first().map(TransferReference::order);
     let mut score = TransferScore::default();
     let mut breakdown = BreakdownBuilder::new(scene);
+    let mut has_transfer = method.capabilities().export;
     let result = run::run_inspecting(
-        &mut method,
+        method.as_mut(),
         scene,
         environment,
         References::vertices(radiance),
@@ -655,23 +651,31 @@ fn run_variant(
             if !has_transfer {
                 return Ok(());
             }
-            let Export::Transfer(transfer) = method.export()? else {
-                return Err(Error::stage(method.name(), "exported no SH transfer"));
+            let transfer = match method.export()? {
+                Export::Transfer(t)
+                    if Some(t.order) == order && t.space == TransferSpace::World =>
+                {
+                    t
+                }
+                _ => {
+                    has_transfer = false;
+                    return Ok(());
+                }
             };
             let reference = &references[index];
             score.add_each(
                 &transfer.coefficients,
                 reference.mean(),
                 Some(reference.std_error()),
-                n,
+                transfer.order.coeff_count(),
                 |v, error| breakdown.add(v, error),
             )
         },
     )?;
     let errors: Vec<ErrorStats> = result.frames.iter().map(|f| f.vertex).collect();
     Ok(Row {
-        name: variant.name.to_string(),
-        what: variant.what.to_string(),
+        name: variant.spec.name().to_string(),
+        what: variant.what.clone(),
         transfer: has_transfer.then(|| score.summary()),
         breakdown: has_transfer.then(|| breakdown.finish()),
         radiance: RadianceError::over_frames(&errors),

@@ -69,10 +69,17 @@ pub fn read_exr(path: &Path) -> Result<Image> {
     })
 }
 
+/// The stem of a method's image files: its name with each `:` (which
+/// Windows refuses in file names) as `_`, e.g. `hemi-raster_pvs_mask=16`.
+pub fn file_stem(method: &str) -> String {
+    method.replace(':', "_")
+}
+
 /// Writes the image set of one scene under `dir/{scene}/`: the reference
 /// (`reference.exr`, `reference.png`) and, for each run with an image of the
-/// same frame, its image (`{method}.exr`, `{method}.png`, shown with the
-/// reference's exposure) and its error heat map (`{method}-error.png`).
+/// same frame, its image (`{stem}.exr`, `{stem}.png`, shown with the
+/// reference's exposure) and its error heat map (`{stem}-error.png`), where
+/// `stem` is [`file_stem`] of the method's name.
 pub fn write_scene(dir: &Path, scene: &str, reference: &Image, runs: &[&RunResult]) -> Result<()> {
     let dir = dir.join(scene);
     let exposure = Exposure::of(reference);
@@ -82,7 +89,7 @@ pub fn write_scene(dir: &Path, scene: &str, reference: &Image, runs: &[&RunResul
         let Some(image) = &run.last_image else {
             continue;
         };
-        let name = &run.method;
+        let name = file_stem(&run.method);
         write_exr(&dir.join(format!("{name}.exr")), image)?;
         write_png(&dir.join(format!("{name}.png")), image, exposure)?;
         write_error_map(&dir.join(format!("{name}-error.png")), image, reference)?;

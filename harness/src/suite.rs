@@ -11,21 +11,49 @@
 //!   directions, the paper's per-vertex occlusion queries, 256 area lights,
 //!   256 rays a vertex), which take minutes per frame on the larger scenes.
 
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 
-/// A method family and its sweep: the method names in order of cost.
+use crate::methods::{MethodSpec, Methods};
+
+/// A method family and its sweep: its settings in order of cost.
 #[derive(Clone, Debug, Serialize)]
-pub struct Family {
-    /// What the chart's legend calls it.
-    pub name: &'static str,
+pub struct Sweep {
+    /// The family's name ([`MethodSpec::family`]), what the chart's legend
+    /// calls it.
+    pub family: &'static str,
     /// What varies along the sweep, for the chart's labels.
     pub parameter: &'static str,
-    /// The method names (see [`crate::methods::by_name`]).
-    pub methods: Vec<&'static str>,
+    #[serde(serialize_with = "names")]
+    pub methods: Vec<MethodSpec>,
+}
+
+/// The specs' names.
+fn names<S: Serializer>(specs: &[MethodSpec], serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.collect_seq(specs.iter().map(MethodSpec::name))
 }
 
 /// The ray tracer's family: the line the other methods have to beat.
-pub const RAY_TRACER: &str = "ray tracing";
+pub const RAY_TRACER: &str = "raytrace";
+
+/// The scene of the image strip: the bunny's contact shadow on a
+/// two-triangle floor, which per-vertex methods cannot draw.
+pub const STRIP_SCENE: &str = "bunny";
+
+/// The settings of the strip, in order (those the suite ran are shown).
+const STRIP_SETTINGS: [&str; 4] = [
+    "deferred-shadow",
+    "hemi-raster",
+    "occlusion-query",
+    "raytrace:64:vertex",
+];
+
+/// The specs of the built-in names `names` (constants of this module, read
+/// by a test).
+fn specs(names: &[&str]) -> Vec<MethodSpec> {
+    Methods::builtin()
+        .parse_all(names)
+        .expect("the suites name valid settings")
+}
 
 /// How much the report runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
@@ -57,38 +85,38 @@ impl Suite {
         }
     }
 
-    /// One setting per family that the atlas runs on every stress scene,
-    /// with the family it belongs to.
-    pub fn atlas_settings(self) -> Vec<(&'static str, &'static str)> {
-        let quick = self == Suite::Quick;
-        vec![
-            ("unshadowed", "unshadowed"),
-            ("hemi-raster", "hemi-raster"),
-            (
+    /// The settings the image strip shows, on [`STRIP_SCENE`], where the
+    /// suite ran them.
+    pub fn strip_settings() -> Vec<MethodSpec> {
+        specs(&STRIP_SETTINGS)
+    }
+
+    /// One setting per family that the atlas runs on every stress scene.
+    pub fn atlas_settings(self) -> Vec<MethodSpec> {
+        specs(&self.atlas_names())
+    }
+
+    fn atlas_names(self) -> [&'static str; 5] {
+        match self {
+            Suite::Quick => [
+                "unshadowed",
+                "hemi-raster",
+                "occlusion-query:k=66",
+                "deferred-shadow:q=8",
+                "raytrace:16",
+            ],
+            Suite::Default | Suite::Full => [
+                "unshadowed",
+                "hemi-raster",
                 "occlusion-query",
-                if quick {
-                    "occlusion-query:k=66"
-                } else {
-                    "occlusion-query"
-                },
-            ),
-            (
                 "deferred-shadow",
-                if quick {
-                    "deferred-shadow:q=8"
-                } else {
-                    "deferred-shadow"
-                },
-            ),
-            (
-                RAY_TRACER,
-                if quick { "raytrace:16" } else { "raytrace:64" },
-            ),
-        ]
+                "raytrace:64",
+            ],
+        }
     }
 
     /// The families and their sweeps.
-    pub fn families(self) -> Vec<Family> {
+    pub fn families(self) -> Vec<Sweep> {
         let quick = self == Suite::Quick;
         let full = self == Suite::Full;
         let pick = |always: &[&'static str], default: &[&'static str], slow: &[&'static str]| {
@@ -99,16 +127,16 @@ impl Suite {
             if full {
                 m.extend(slow);
             }
-            m
+            specs(&m)
         };
         vec![
-            Family {
-                name: "unshadowed",
+            Sweep {
+                family: "unshadowed",
                 parameter: "SH order 9, no visibility",
-                methods: vec!["unshadowed"],
+                methods: specs(&["unshadowed"]),
             },
-            Family {
-                name: "hemi-raster",
+            Sweep {
+                family: "hemi-raster",
                 parameter: "visible sets, mask side, plane table, SH order, integration, near reach, hierarchy",
                 methods: pick(
                     &["hemi-raster:pvs", "hemi-raster"],
@@ -123,8 +151,8 @@ impl Suite {
                     &["hemi-raster:pvs:mask=64", "hemi-raster:pvs:order=7"],
                 ),
             },
-            Family {
-                name: "occlusion-query",
+            Sweep {
+                family: "occlusion-query",
                 parameter: "lightsphere directions k, depth map side",
                 methods: pick(
                     &["occlusion-query:k=18", "occlusion-query:k=66"],
@@ -140,8 +168,8 @@ impl Suite {
                     ],
                 ),
             },
-            Family {
-                name: "deferred-shadow",
+            Sweep {
+                family: "deferred-shadow",
                 parameter: "area lights q, map side",
                 methods: pick(
                     &["deferred-shadow:q=8", "deferred-shadow"],
@@ -149,8 +177,8 @@ impl Suite {
                     &["deferred-shadow:q=256"],
                 ),
             },
-            Family {
-                name: RAY_TRACER,
+            Sweep {
+                family: RAY_TRACER,
                 parameter: "MIS iterations per vertex and pixel",
                 methods: pick(
                     &["raytrace:4", "raytrace:16"],
@@ -165,15 +193,28 @@ impl Suite {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::methods::{SharedGpu, by_name, check};
+    use crate::methods::SharedGpu;
 
-    /// Every name of every suite parses, without a device.
+    /// Every name of every suite is the name its method prints, and of the
+    /// family it is listed under.
     #[test]
-    fn every_method_of_every_suite_is_a_valid_name() {
-        for family in Suite::Full.families() {
-            for method in &family.methods {
-                assert!(check(method).is_ok(), "{method}: {:?}", check(method));
+    fn every_name_of_every_suite_is_as_printed() {
+        for suite in [Suite::Quick, Suite::Default, Suite::Full] {
+            for sweep in suite.families() {
+                for spec in &sweep.methods {
+                    assert_eq!(spec.family(), sweep.family);
+                    assert_eq!(
+                        crate::methods::parse(spec.name()).unwrap().name(),
+                        spec.name()
+                    );
+                }
             }
+            for (spec, name) in suite.atlas_settings().iter().zip(suite.atlas_names()) {
+                assert_eq!(spec.name(), name);
+            }
+        }
+        for (spec, name) in Suite::strip_settings().iter().zip(STRIP_SETTINGS) {
+            assert_eq!(spec.name(), name);
         }
     }
 
@@ -182,21 +223,26 @@ mod tests {
         skip_gpu_tests,
         ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
     )]
-    fn every_method_of_every_suite_builds_by_name() {
+    fn every_method_of_every_suite_builds() {
         let context = shadow_core::gpu::test_context();
         let gpu = SharedGpu::with(context);
-        for family in Suite::Full.families() {
-            for method in &family.methods {
-                let built = by_name(method, &gpu);
-                assert!(built.is_ok(), "{method}: {:?}", built.err());
+        for sweep in Suite::Full.families() {
+            for spec in &sweep.methods {
+                let built = spec.build(&gpu);
+                assert!(built.is_ok(), "{spec}: {:?}", built.err());
             }
         }
     }
 
     #[test]
     fn suites_grow_from_quick_to_full() {
-        let methods =
-            |s: Suite| -> Vec<&str> { s.families().into_iter().flat_map(|f| f.methods).collect() };
+        let methods = |s: Suite| -> Vec<String> {
+            s.families()
+                .into_iter()
+                .flat_map(|f| f.methods)
+                .map(|m| m.name().to_string())
+                .collect()
+        };
         let (quick, default, full) = (
             methods(Suite::Quick),
             methods(Suite::Default),

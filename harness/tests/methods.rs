@@ -157,7 +157,10 @@ fn harness_binary_lists_and_rejects_bad_input_clearly() {
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
-        text.contains("furnace") && text.contains("raytrace:N"),
+        text.contains("furnace")
+            && text.contains("thin-sheets")
+            && text.contains("raytrace:16")
+            && text.contains("k=N, queries"),
         "{text}"
     );
 

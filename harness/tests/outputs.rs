@@ -353,13 +353,13 @@ fn image_scores_agree_with_the_written_images() {
             "1",
             "--target",
             "0.05",
-            "--image",
+            "--image-width",
             "40",
             "--image-target",
             "0.05",
-            "--dir",
+            "--out-dir",
             report.to_str().unwrap(),
-            "--images",
+            "--images-dir",
             pictures.to_str().unwrap(),
         ],
         &cache,
@@ -377,7 +377,8 @@ fn image_scores_agree_with_the_written_images() {
     assert!(runs.len() >= 5);
     for run in runs {
         let method = run["method"].as_str().unwrap();
-        let image = images::read_exr(&pictures.join(format!("wall/{method}.exr"))).unwrap();
+        let stem = images::file_stem(method);
+        let image = images::read_exr(&pictures.join(format!("wall/{stem}.exr"))).unwrap();
         let (mut num, mut den) = (0.0f64, 0.0f64);
         for i in 0..reference.pixels.len() {
             if reference.covered[i] {
@@ -396,8 +397,8 @@ fn image_scores_agree_with_the_written_images() {
             (recomputed - reported).abs() <= 1e-5 * reported.max(1e-3),
             "{method}: {recomputed} recomputed, {reported} reported"
         );
-        assert!(pictures.join(format!("wall/{method}-error.png")).is_file());
-        assert!(image::open(pictures.join(format!("wall/{method}.png"))).is_ok());
+        assert!(pictures.join(format!("wall/{stem}-error.png")).is_file());
+        assert!(image::open(pictures.join(format!("wall/{stem}.png"))).is_ok());
     }
     let markdown = std::fs::read_to_string(report.join("report.md")).unwrap();
     assert!(
@@ -418,7 +419,15 @@ fn bad_requests_are_refused_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
     let cache = dir.path().join("cache");
     let run = |extra: &[&str]| {
-        let mut args = vec!["run", "--scene", "wall", "--target", "0.2", "--image", "8"];
+        let mut args = vec![
+            "run",
+            "--scene",
+            "wall",
+            "--target",
+            "0.2",
+            "--image-width",
+            "8",
+        ];
         args.extend_from_slice(extra);
         harness_command(&args, &cache)
     };
@@ -428,8 +437,8 @@ fn bad_requests_are_refused_before_any_work() {
         assert!(err.contains(needle) && !err.contains("panicked"), "{err}");
     };
 
-    let out = run(&["--method", "unshadowed", "--image", "0"]);
-    refused(&out, "--image");
+    let out = run(&["--method", "unshadowed", "--image-width", "0"]);
+    refused(&out, "--image-width");
 
     let missing = dir.path().join("no/such/folder/out.csv");
     let out = run(&["--method", "unshadowed", "--out", missing.to_str().unwrap()]);
@@ -450,6 +459,30 @@ fn bad_requests_are_refused_before_any_work() {
 
     let out = run(&["--method", "raytrace:1"]);
     refused(&out, "invalid configuration");
+
+    // A typo in a method or a scene names the closest valid one.
+    refused(
+        &run(&["--method", "hemi-raster:msak=16"]),
+        "did you mean mask=",
+    );
+    let out = harness_command(
+        &["run", "--scene", "tepot", "--method", "unshadowed"],
+        &cache,
+    );
+    refused(&out, "did you mean teapot?");
+    let report = |scenes: &str| {
+        let out_dir = dir.path().join("report");
+        let args = [
+            "report",
+            "--scenes",
+            scenes,
+            "--out-dir",
+            out_dir.to_str().unwrap(),
+        ];
+        harness_command(&args, &cache)
+    };
+    refused(&report("bunny,tepot"), "did you mean teapot?");
+    assert!(!dir.path().join("report").exists());
 
     // A GPU method where wgpu finds no adapter (only Metal allowed, on a
     // machine without it), or only OpenGL is asked for, whose shading

@@ -147,7 +147,7 @@ const METHODS: &[&str] = &[
 const CASES: u32 = 16;
 
 fn is_gpu(method: &str) -> bool {
-    matches!(family(method), Family::Directions | Family::AreaLights)
+    methods::parse(method).expect("a valid name").needs_gpu()
 }
 
 /// What a method may return on a frame: per vertex at most
@@ -177,14 +177,12 @@ enum Family {
 }
 
 fn family(method: &str) -> Family {
-    if method.starts_with("hemi-raster") {
-        Family::Sh
-    } else if method.starts_with("occlusion-query") {
-        Family::Directions
-    } else if method.starts_with("deferred-shadow") {
-        Family::AreaLights
-    } else {
-        Family::MonteCarlo
+    match methods::parse(method).expect("a valid name").family() {
+        "hemi-raster" => Family::Sh,
+        "occlusion-query" => Family::Directions,
+        "deferred-shadow" => Family::AreaLights,
+        "raytrace" => Family::MonteCarlo,
+        other => panic!("no tolerance is set for the {other} family"),
     }
 }
 

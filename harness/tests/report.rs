@@ -21,7 +21,7 @@ fn quick_report() -> (tempfile::TempDir, PathBuf) {
     harness(&[
         "report",
         "--quick",
-        "--dir",
+        "--out-dir",
         out.to_str().unwrap(),
         "--cache",
         dir.path().join("cache").to_str().unwrap(),
@@ -29,7 +29,7 @@ fn quick_report() -> (tempfile::TempDir, PathBuf) {
         "0.02",
         "--image-target",
         "0.03",
-        "--image",
+        "--image-width",
         "64",
         "--repeats",
         "1",
@@ -58,12 +58,19 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     let runs = json["runs"].as_array().unwrap();
     let skipped = json["skipped"].as_array().unwrap();
+    assert_eq!(
+        json["failed"].as_array().unwrap().len(),
+        0,
+        "{:#}",
+        json["failed"]
+    );
 
     // A row per scene and setting, or a reason naming what is missing.
     let mut seen = BTreeSet::new();
     for scene in Suite::Quick.scenes() {
         for family in Suite::Quick.families() {
-            for setting in family.methods {
+            for spec in family.methods {
+                let setting = spec.name().to_string();
                 let ran = runs
                     .iter()
                     .any(|r| r["scene"] == scene && r["setting"] == setting);
@@ -127,7 +134,8 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
     // a sentence each; a refusal names the capability.
     let atlas = json["atlas"].as_array().unwrap();
     for scene in Suite::Quick.atlas_scenes() {
-        for (_, setting) in Suite::Quick.atlas_settings() {
+        for spec in Suite::Quick.atlas_settings() {
+            let setting = spec.name();
             let entry = atlas
                 .iter()
                 .find(|a| a["scene"] == scene && a["setting"] == setting)

@@ -8,11 +8,12 @@ use approx::assert_relative_eq;
 use glam::Vec3;
 use harness::{
     accuracy::{self, AccuracyReport, TransferScore},
+    methods::SharedGpu,
     reference::{
-        self, ReferenceSettings,
+        self, ReferenceInfo, ReferenceSettings,
         transfer::{TransferSettings, scene_transfer_references, transfer_reference},
     },
-    report::{MachineInfo, ReferenceInfo},
+    report::MachineInfo,
 };
 use hemi_raster::HemiRaster;
 use indicatif::ProgressBar;
@@ -342,24 +343,31 @@ fn the_accuracy_table_of_a_small_scene() {
         transfer: replicated(64),
         variants: accuracy::variants()
             .into_iter()
-            .filter(|v| ["default", "direct"].contains(&v.name))
+            .filter(|v| ["hemi-raster", "hemi-raster:direct"].contains(&v.spec.name()))
             .collect(),
         repeats: 1,
     };
     let radiance = vec![radiance];
+    let gpu = SharedGpu::new();
     let result = accuracy::evaluate(
         &scene,
         &env,
         &radiance,
         info.clone(),
         &plan,
+        &gpu,
         &ProgressBar::hidden(),
     )
     .unwrap();
     let names: Vec<&str> = result.rows.iter().map(|r| r.name.as_str()).collect();
     assert_eq!(
         names,
-        ["unshadowed", "reference transfer", "default", "direct"]
+        [
+            "unshadowed",
+            "reference transfer",
+            "hemi-raster",
+            "hemi-raster:direct"
+        ]
     );
     let [unshadowed, floor, default, direct] = &result.rows[..] else {
         unreachable!()
@@ -393,7 +401,7 @@ fn the_accuracy_table_of_a_small_scene() {
     report.write(dir.path()).unwrap();
     let md = std::fs::read_to_string(dir.path().join("accuracy.md")).unwrap();
     assert!(
-        md.contains("| default |") && md.contains("| reference transfer |"),
+        md.contains("| hemi-raster |") && md.contains("| reference transfer |"),
         "{md}"
     );
     let json: serde_json::Value =
@@ -401,7 +409,7 @@ fn the_accuracy_table_of_a_small_scene() {
     assert_eq!(json["scenes"][0]["rows"].as_array().unwrap().len(), 4);
 
     // One radiance reference per frame, or a clear error.
-    let err =
-        accuracy::evaluate(&scene, &env, &[], info, &plan, &ProgressBar::hidden()).unwrap_err();
+    let err = accuracy::evaluate(&scene, &env, &[], info, &plan, &gpu, &ProgressBar::hidden())
+        .unwrap_err();
     assert!(err.to_string().contains("radiance references"), "{err}");
 }

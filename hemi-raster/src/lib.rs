@@ -8,6 +8,7 @@ mod engine;
 mod hierarchy;
 mod mask;
 mod method;
+pub mod name;
 mod pvs;
 mod raster;
 mod transfer;

@@ -2,9 +2,10 @@
 
 use shadow_core::{Error, Result};
 
-const NAME: &str = "occlusion-query";
-
-use crate::lightsphere::{Level, Orientation, Weights};
+use crate::{
+    lightsphere::{Level, Orientation, Weights},
+    name::NAME,
+};
 
 /// How each vertex is tested against a direction's depth map (§3.1–3.2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -219,57 +220,6 @@ impl Config {
         }
     }
 
-    /// The method's name, which says every setting that changes the
-    /// result, so that a report says which it shows and no two settings
-    /// share an image file: the level, then each setting that differs from
-    /// the default, e.g. `occlusion-query-k66-queries-equal-weights-raw-axes-offset-f1-u1`
-    /// for `Config { level: 66 directions, ..Config::paper() }`.
-    pub fn name(&self) -> String {
-        let default = Config::default();
-        let mut name = format!("{NAME}-k{}", self.level.directions());
-        let switches = [
-            (self.test == VertexTest::OcclusionQuery, "-queries"),
-            (self.weights == Weights::Equal, "-equal-weights"),
-            (self.normalization == Normalization::Off, "-raw"),
-        ];
-        for (applies, suffix) in switches {
-            if applies {
-                name.push_str(suffix);
-            }
-        }
-        if let Some(filtering) = self.filtering {
-            name.push_str("-filtered");
-            if filtering != Filtering::default() {
-                name.push_str(&format!("{}", filtering.threshold));
-            }
-        }
-        if let Some(idle) = self.idle_level {
-            name.push_str(&format!("-refined{}", idle.directions()));
-        }
-        if self.orientation != default.orientation {
-            name.push_str(match self.orientation {
-                Orientation::Axes => "-axes",
-                Orientation::Turned => "-turned",
-            });
-        }
-        if let Occluder::Simplified { texels } = self.occluder {
-            name.push_str("-simplified");
-            if self.occluder != Config::fast().occluder {
-                name.push_str(&format!("{texels}"));
-            }
-        }
-        if self.map_resolution != default.map_resolution {
-            name.push_str(&format!("-map{}", self.map_resolution));
-        }
-        if self.offset != default.offset {
-            name.push_str(&offset_name(self.offset));
-        }
-        if self.prefilter != default.prefilter {
-            name.push_str(&format!("-blur{}", self.prefilter));
-        }
-        name
-    }
-
     /// The finest level the method can reach.
     pub fn finest(&self) -> Level {
         self.idle_level
@@ -322,82 +272,5 @@ impl Config {
             ));
         }
         Ok(())
-    }
-}
-
-/// `-offset` and the offset's terms that are not zero, e.g.
-/// `-offset-f1-u1` for [`DepthOffset::PAPER`].
-fn offset_name(offset: DepthOffset) -> String {
-    let terms = [
-        ("f", offset.occluder_slope),
-        ("u", offset.occluder_units as f32),
-        ("c", offset.occluder_clamp),
-        ("s", offset.receiver_slope),
-        ("l", offset.toward_light),
-        ("n", offset.along_normal),
-    ];
-    let mut name = "-offset".to_string();
-    for (letter, value) in terms {
-        if value != 0.0 {
-            name.push_str(&format!("-{letter}{value}"));
-        }
-    }
-    if offset == DepthOffset::NONE {
-        name.push_str("-none");
-    }
-    name
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every setting that changes the result shows in the name; the
-    /// defaults do not.
-    #[test]
-    fn names_say_every_setting_that_changes_the_result() {
-        assert_eq!(Config::default().name(), "occlusion-query-k258");
-        assert_eq!(Config::fast().name(), "occlusion-query-k258-simplified");
-        let paper = Config {
-            level: Level::new(2).unwrap(),
-            ..Config::paper()
-        };
-        let paper_name = match Config::default().orientation {
-            Orientation::Turned => {
-                "occlusion-query-k66-queries-equal-weights-raw-axes-offset-f1-u1"
-            }
-            Orientation::Axes => "occlusion-query-k66-queries-equal-weights-raw-offset-f1-u1",
-        };
-        assert_eq!(paper.name(), paper_name);
-        let changed = Config {
-            idle_level: Level::new(4),
-            filtering: Some(Filtering { threshold: 0.1 }),
-            occluder: Occluder::Simplified { texels: 2.0 },
-            map_resolution: 256,
-            offset: DepthOffset {
-                along_normal: 0.75,
-                ..DepthOffset::NONE
-            },
-            prefilter: 0.3,
-            ..Config::default()
-        };
-        assert_eq!(
-            changed.name(),
-            "occlusion-query-k258-filtered0.1-refined1026-simplified2-map256-offset-n0.75-blur0.3"
-        );
-        let none = Config {
-            offset: DepthOffset::NONE,
-            ..Config::default()
-        };
-        assert_eq!(none.name(), "occlusion-query-k258-offset-none");
-        // Two settings that differ have different names.
-        assert_ne!(
-            Config {
-                prefilter: 0.5,
-                ..Config::default()
-            }
-            .name(),
-            Config::default().name()
-        );
     }
 }

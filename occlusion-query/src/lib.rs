@@ -9,6 +9,7 @@ mod config;
 mod filter;
 mod lightsphere;
 mod method;
+pub mod name;
 mod occluder;
 mod shading;
 mod views;

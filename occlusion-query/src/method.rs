@@ -15,6 +15,7 @@ use shadow_core::{
 use crate::config::{Config, DepthOffset, Normalization, Occluder};
 use crate::filter::{CameraFilter, vertices_of};
 use crate::lightsphere::{Level, Lightsphere};
+use crate::name::NAME;
 use crate::occluder;
 use crate::shading::Shading;
 use crate::views::{self, GpuDirection};
@@ -101,8 +102,6 @@ struct Job {
     list: Vec<u32>,
     directions: Range<usize>,
 }
-
-const NAME: &str = "occlusion-query";
 
 impl OcclusionQuery {
     /// The method on `ctx`'s device (shared with other methods, or a host

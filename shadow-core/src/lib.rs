@@ -15,6 +15,7 @@ mod export;
 pub mod frame;
 mod mesh;
 mod method;
+pub mod name;
 mod profile;
 pub mod qmc;
 pub mod raster;

@@ -26,10 +26,13 @@ pub struct RayTrace {
 }
 
 impl RayTrace {
+    /// The seed of the harness's `raytrace` settings.
+    pub const SEED: u64 = 0xba5e;
+
     /// Images traced per pixel.
     pub fn new(iterations: u32, seed: u64) -> RayTrace {
         RayTrace {
-            name: format!("raytrace-{iterations}"),
+            name: format!("raytrace:{iterations}"),
             settings: ReferenceSettings::fixed(iterations, seed),
             per_pixel: true,
             scene: None,
@@ -41,7 +44,7 @@ impl RayTrace {
     /// Images interpolated from the vertices' results.
     pub fn per_vertex(iterations: u32, seed: u64) -> RayTrace {
         RayTrace {
-            name: format!("raytrace-{iterations}-vertex"),
+            name: format!("raytrace:{iterations}:vertex"),
             per_pixel: false,
             ..RayTrace::new(iterations, seed)
         }

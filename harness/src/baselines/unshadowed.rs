@@ -13,6 +13,9 @@ use shadow_core::{
 
 /// SH lighting without shadows.
 pub struct Unshadowed {
+    /// `unshadowed`, with `:order=N` where the order is not
+    /// [`Unshadowed::ORDER`].
+    name: String,
     order: ShOrder,
     materials: Vec<Brdf>,
     frame: Option<FrameGeometry>,
@@ -23,11 +26,19 @@ pub struct Unshadowed {
 }
 
 impl Unshadowed {
+    /// The order the harness's `unshadowed` uses.
+    pub const ORDER: u32 = 9;
+
     /// SH of `order` (bands 0..order−1). The clamped-cosine kernel falls off as
     /// l⁻²·⁵, so order 3 already holds 99% of irradiance and order 9 is exact to
     /// well below a percent; glossy lobes need more (about √exponent bands).
     pub fn new(order: ShOrder) -> Unshadowed {
+        let name = match order.get() {
+            Unshadowed::ORDER => "unshadowed".to_string(),
+            n => format!("unshadowed:order={n}"),
+        };
         Unshadowed {
+            name,
             order,
             materials: Vec::new(),
             frame: None,
@@ -39,7 +50,7 @@ impl Unshadowed {
 
 impl ShadowMethod for Unshadowed {
     fn name(&self) -> &str {
-        "unshadowed"
+        &self.name
     }
 
     /// Everything: ignoring visibility costs nothing for any kind of scene.

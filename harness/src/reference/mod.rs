@@ -5,6 +5,7 @@
 
 mod cache;
 mod estimator;
+mod info;
 pub mod transfer;
 
 use std::time::Instant;
@@ -20,6 +21,7 @@ use shadow_core::{
 
 pub use cache::{Domain, ReferenceCache, cache_key};
 pub use estimator::{Accumulator, Estimator, ShadingPoint, stream};
+pub use info::{ImageReferenceInfo, ReferenceInfo};
 
 /// How long the estimator runs.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

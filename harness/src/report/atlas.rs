@@ -6,8 +6,9 @@
 
 use serde::Serialize;
 
-use super::{Block, Document, Figure, ReferenceInfo, ReportRun, Table};
+use super::{Block, Document, Figure, ReportRun, Table};
 use crate::run::RunResult;
+use crate::{methods::MethodSpec, reference::ReferenceInfo};
 
 /// A stress scene of the atlas and its reference.
 #[derive(Clone, Debug, Serialize)]
@@ -43,16 +44,15 @@ impl AtlasRun {
     /// setting's runs on the standard scenes.
     pub fn new(
         scene: &AtlasScene,
-        family: &str,
-        setting: &str,
+        spec: &MethodSpec,
         outcome: Outcome,
         standard: &[ReportRun],
     ) -> AtlasRun {
-        let diagnosis = diagnose(setting, &outcome, standard);
+        let diagnosis = diagnose(spec.name(), &outcome, standard);
         AtlasRun {
             scene: scene.name.clone(),
-            family: family.to_string(),
-            setting: setting.to_string(),
+            family: spec.family().to_string(),
+            setting: spec.name().to_string(),
             outcome,
             diagnosis,
         }
@@ -183,7 +183,11 @@ pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun
                     ]);
                     if r.last_image.is_some() || r.image_size.is_some() {
                         maps.push(Figure {
-                            path: format!("atlas/{}/{}-error.png", scene.name, r.method),
+                            path: format!(
+                                "atlas/{}/{}-error.png",
+                                scene.name,
+                                crate::images::file_stem(&r.method)
+                            ),
                             caption: format!("{} error", run.setting),
                         });
                     }

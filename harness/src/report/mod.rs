@@ -11,7 +11,9 @@
 //! report as it was.
 
 mod atlas;
+mod collect;
 mod document;
+mod machine;
 #[cfg(test)]
 mod tests;
 
@@ -23,155 +25,15 @@ use shadow_core::Result;
 use crate::{
     chart::{self, Axes, Curve, Point},
     io::{write_atomic, write_json_atomic},
+    reference::ReferenceInfo,
     run::{FrameResult, RunResult},
     score::ErrorStats,
-    suite::{Family, RAY_TRACER, Suite},
+    suite::{RAY_TRACER, Suite, Sweep},
 };
 pub use atlas::{AtlasRun, AtlasScene, Outcome};
+pub use collect::{Plan, collect};
 pub use document::{Block, Document, Figure, Table};
-
-/// Where and how the numbers were measured.
-#[derive(Clone, Debug, Serialize)]
-pub struct MachineInfo {
-    pub cpu: String,
-    /// The SIMD extensions the CPU reports that the methods' code paths use.
-    pub cpu_features: Vec<&'static str>,
-    pub threads: usize,
-    /// The wgpu adapter the GPU methods ran on; `None` when no GPU method ran.
-    pub adapter: Option<String>,
-    pub profile: &'static str,
-    /// `git describe` of the source tree (with `-dirty` for local changes),
-    /// when it is a git checkout.
-    pub revision: Option<String>,
-}
-
-impl MachineInfo {
-    pub fn detect(adapter: Option<String>) -> MachineInfo {
-        MachineInfo {
-            cpu: cpu_name(cpuinfo().as_deref()),
-            cpu_features: cpu_features(),
-            threads: rayon::current_num_threads(),
-            adapter,
-            profile: if cfg!(debug_assertions) {
-                "debug"
-            } else {
-                "release"
-            },
-            revision: revision(),
-        }
-    }
-
-    /// Whether the adapter is a software rasterizer (Mesa's llvmpipe or
-    /// lavapipe, or one that says so): its GPU timings are CPU timings.
-    pub fn software_adapter(&self) -> bool {
-        self.adapter.as_deref().is_some_and(|a| {
-            let a = a.to_lowercase();
-            a.contains("llvmpipe") || a.contains("lavapipe") || a.contains("software")
-        })
-    }
-
-    /// The CPU's model name with its family and model numbers, which tell
-    /// generations apart where the name does not (a virtual machine's "AMD
-    /// EPYC" may be a Zen 3 or a Zen 4, whose timings differ twofold): for
-    /// benchmark printouts. Without them, as [`MachineInfo::detect`] names it.
-    pub fn cpu_generation() -> String {
-        let info = cpuinfo();
-        let info = info.as_deref();
-        let name = cpu_name(info);
-        let field = |key| info.and_then(|i| cpuinfo_field(i, key));
-        match (field("cpu family"), field("model")) {
-            (Some(family), Some(model)) => format!("{name} (family {family}, model {model})"),
-            _ => name,
-        }
-    }
-}
-
-/// The SIMD extensions detected at run time that matter to the methods.
-fn cpu_features() -> Vec<&'static str> {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let mut found = Vec::new();
-        macro_rules! check {
-            ($($f:tt),*) => {$(
-                if std::arch::is_x86_feature_detected!($f) {
-                    found.push($f);
-                }
-            )*};
-        }
-        check!(
-            "sse4.2", "avx", "avx2", "fma", "bmi1", "bmi2", "popcnt", "avx512f", "avx512bw",
-            "avx512dq", "avx512vl"
-        );
-        found
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    Vec::new()
-}
-
-/// `git describe --always --dirty` of the crate's source tree, if it is a
-/// git checkout and git runs.
-fn revision() -> Option<String> {
-    let out = std::process::Command::new("git")
-        .args(["describe", "--always", "--dirty", "--abbrev=12"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .ok()?;
-    out.status
-        .success()
-        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
-        .filter(|r| !r.is_empty())
-}
-
-/// The text of /proc/cpuinfo (Linux only).
-fn cpuinfo() -> Option<String> {
-    std::fs::read_to_string("/proc/cpuinfo").ok()
-}
-
-/// The first value of `key` in /proc/cpuinfo's text `info`.
-fn cpuinfo_field<'a>(info: &'a str, key: &str) -> Option<&'a str> {
-    info.lines()
-        .filter_map(|l| l.split_once(':'))
-        .find(|(k, _)| k.trim() == key)
-        .map(|(_, value)| value.trim())
-}
-
-/// The CPU's model name from /proc/cpuinfo's text, or the architecture
-/// where it is not known.
-fn cpu_name(info: Option<&str>) -> String {
-    info.and_then(|i| cpuinfo_field(i, "model name"))
-        .map_or_else(|| std::env::consts::ARCH.to_owned(), str::to_owned)
-}
-
-/// A scene's references: how they were made and how noisy they are.
-#[derive(Clone, Debug, Serialize)]
-pub struct ReferenceInfo {
-    pub scene: String,
-    pub environment: String,
-    pub frames: usize,
-    pub vertices: usize,
-    /// Worst per-frame relative L2 noise.
-    pub noise: f32,
-    pub rays: u64,
-    /// Seconds spent computing it (0 when every frame came from the cache).
-    pub seconds: f64,
-    pub cached: bool,
-    /// The per-pixel reference, when images are scored.
-    pub image: Option<ImageReferenceInfo>,
-}
-
-/// A scene's per-pixel reference.
-#[derive(Clone, Debug, Serialize)]
-pub struct ImageReferenceInfo {
-    pub width: u32,
-    pub height: u32,
-    /// Covered pixels, summed over frames.
-    pub pixels: usize,
-    /// Worst per-frame relative L2 noise over the covered pixels.
-    pub noise: f32,
-    pub rays: u64,
-    pub seconds: f64,
-    pub cached: bool,
-}
+pub use machine::MachineInfo;
 
 /// How the report was run: everything needed to run it again.
 #[derive(Clone, Debug, Serialize)]
@@ -211,29 +73,20 @@ pub struct Report {
     pub machine: MachineInfo,
     pub settings: Settings,
     pub references: Vec<ReferenceInfo>,
-    pub families: Vec<Family>,
+    pub families: Vec<Sweep>,
     pub runs: Vec<ReportRun>,
     pub skipped: Vec<Skipped>,
+    /// Settings (or a scene's references, `reference`) that failed, and
+    /// the error.
+    pub failed: Vec<Skipped>,
     /// The scene whose images the report shows side by side
-    /// ([`STRIP_SCENE`]), when its images were written (under
+    /// ([`crate::suite::STRIP_SCENE`]), when its images were written (under
     /// `strip/{scene}/`).
     pub strip: Option<String>,
     /// The stability atlas's scenes and runs (images under `atlas/{scene}/`).
     pub atlas_scenes: Vec<AtlasScene>,
     pub atlas: Vec<AtlasRun>,
 }
-
-/// The scene of the image strip: the bunny's contact shadow on a
-/// two-triangle floor, which per-vertex methods cannot draw.
-pub const STRIP_SCENE: &str = "bunny";
-
-/// The settings of the strip, in order (those the suite ran).
-const STRIP_SETTINGS: [&str; 4] = [
-    "deferred-shadow",
-    "hemi-raster",
-    "occlusion-query",
-    "raytrace:64:vertex",
-];
 
 /// The overall charts: every run of every scene.
 const OVERVIEW: [&str; 2] = ["speed-vs-error.png", "speed-vs-error-image.png"];
@@ -290,7 +143,7 @@ impl Report {
             .filter_map(|f| {
                 let mut points: Vec<(String, f64, f64)> = self
                     .runs_of(scene)
-                    .filter(|r| r.family == f.name)
+                    .filter(|r| r.family == f.family)
                     .filter_map(|r| {
                         let (e, t) = domain.point(&r.result)?;
                         Some((setting_label(&r.setting), e, t))
@@ -298,9 +151,9 @@ impl Report {
                     .collect();
                 points.sort_by(|a, b| a.2.total_cmp(&b.2));
                 (!points.is_empty()).then(|| Curve {
-                    family: f.name.to_string(),
+                    family: f.family.to_string(),
                     points,
-                    baseline: f.name == RAY_TRACER,
+                    baseline: f.family == RAY_TRACER,
                 })
             })
             .collect()
@@ -559,14 +412,18 @@ impl Report {
             self.strip_blocks(&mut doc, scene);
         }
         atlas::blocks(&mut doc, &self.atlas_scenes, &self.atlas);
-        if !self.skipped.is_empty() {
-            doc.push(Block::Heading(2, "Not run".into()));
-            doc.push(Block::Bullets(
-                self.skipped
-                    .iter()
-                    .map(|s| format!("{} on {}: {}", s.method, s.scene, s.why))
-                    .collect(),
-            ));
+        for (heading, list) in [
+            ("Failed", &self.failed),
+            ("Not run (not supported)", &self.skipped),
+        ] {
+            if !list.is_empty() {
+                doc.push(Block::Heading(2, heading.into()));
+                doc.push(Block::Bullets(
+                    list.iter()
+                        .map(|s| format!("{} on {}: {}", s.method, s.scene, s.why))
+                        .collect(),
+                ));
+            }
         }
         doc.push(Block::Heading(2, "Reproducibility".into()));
         let s = &self.settings;
@@ -588,7 +445,10 @@ impl Report {
                 "settings run: {}",
                 self.families
                     .iter()
-                    .map(|f| format!("{} ({}): {}", f.name, f.parameter, f.methods.join(", ")))
+                    .map(|f| {
+                        let names: Vec<&str> = f.methods.iter().map(|m| m.name()).collect();
+                        format!("{} ({}): {}", f.family, f.parameter, names.join(", "))
+                    })
                     .collect::<Vec<_>>()
                     .join("; ")
             ),
@@ -602,7 +462,7 @@ impl Report {
             return None;
         }
         let mut columns = vec!["scene".to_string()];
-        columns.extend(self.families.iter().map(|f| f.name.to_string()));
+        columns.extend(self.families.iter().map(|f| f.family.to_string()));
         let mut table = Table {
             numeric: vec![false; columns.len()],
             header: columns,
@@ -613,7 +473,7 @@ impl Report {
             for family in &self.families {
                 let best = |domain: Domain| {
                     self.runs_of(scene)
-                        .filter(|r| r.family == family.name)
+                        .filter(|r| r.family == family.family)
                         .filter_map(|r| Some((domain.point(&r.result)?, &r.setting)))
                         .min_by(|a, b| a.0.0.total_cmp(&b.0.0))
                 };
@@ -681,11 +541,11 @@ impl Report {
     /// The strip: the reference, then each strip setting's image and its
     /// error map, with its error per pixel.
     fn strip_blocks(&self, doc: &mut Document, scene: &str) {
-        let runs: Vec<&ReportRun> = STRIP_SETTINGS
+        let runs: Vec<&ReportRun> = Suite::strip_settings()
             .iter()
             .filter_map(|m| {
                 self.runs_of(scene)
-                    .find(|r| r.setting == *m && r.result.last_image.is_some())
+                    .find(|r| r.setting == m.name() && r.result.last_image.is_some())
             })
             .collect();
         doc.push(Block::Heading(
@@ -705,7 +565,7 @@ impl Report {
         }];
         let mut errors = Vec::new();
         for r in &runs {
-            let label = &r.result.method;
+            let label = crate::images::file_stem(&r.result.method);
             images.push(Figure {
                 path: format!("strip/{scene}/{label}.png"),
                 caption: format!(

@@ -1,4 +1,5 @@
 use super::*;
+use crate::reference::ImageReferenceInfo;
 use crate::run::StageTimes;
 use crate::score::Temporal;
 use shadow_core::{Capabilities, Profile};
@@ -98,6 +99,11 @@ fn report() -> Report {
             scene: "human".into(),
             why: "does not support deforming meshes".into(),
         }],
+        failed: vec![Skipped {
+            method: "occlusion-query:k=66".into(),
+            scene: "human".into(),
+            why: "GPU: device lost".into(),
+        }],
         strip: None,
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
@@ -127,6 +133,7 @@ fn the_report_writes_every_file_with_a_row_per_run() {
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("software-rasterized"));
     assert!(md.contains("hemi-raster on human: does not support deforming meshes"));
+    assert!(md.contains("## Failed") && md.contains("occlusion-query:k=66 on human: GPU"));
     assert!(md.contains("![bunny: time against error](charts/bunny-vertex.png)"));
     let html = std::fs::read_to_string(dir.path().join("index.html")).unwrap();
     assert!(html.contains("data:image/png;base64,") && !html.contains("[missing"));

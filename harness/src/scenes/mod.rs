@@ -168,11 +168,27 @@ pub fn builtin(name: &str) -> Result<Scene> {
         "teapot" => asset_scene(name, &assets.join("teapot_npm_792v.glb"), 1, white()),
         "cloth" => cloth::scene(name),
         "chess" => chess::scene(name),
-        _ => Err(Error::InvalidScene(format!(
-            "unknown scene {name:?}; built-in scenes are {}",
-            SCENES.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
-        ))),
+        _ => Err(unknown(
+            name,
+            "built-in scene",
+            SCENES.iter().map(|s| s.name),
+        )),
     }
+}
+
+/// The error for a scene `name` that is none of `names`, naming the
+/// closest.
+pub(crate) fn unknown<'a>(
+    name: &str,
+    kind: &str,
+    names: impl Iterator<Item = &'a str> + Clone,
+) -> Error {
+    let hint = shadow_core::name::closest(name, names.clone())
+        .map_or(String::new(), |c| format!(" (did you mean {c}?)"));
+    Error::InvalidScene(format!(
+        "unknown {kind} {name:?}{hint}; {kind}s are {}",
+        names.collect::<Vec<_>>().join(", ")
+    ))
 }
 
 /// Loads an environment by name (`uniform` or a shipped map) or from a path;

@@ -15,7 +15,7 @@ use std::{
 
 use glam::{Affine3A, Vec2, Vec3};
 use shadow_core::{
-    Environment, Error, Frame, Mesh, Object, Pose, Result, Scene, environment::luminance, shapes,
+    Environment, Frame, Mesh, Object, Pose, Result, Scene, environment::luminance, shapes,
 };
 
 use super::{framed, still, white};
@@ -95,14 +95,11 @@ pub fn stress_scenes() -> Result<Vec<StressScene>> {
 /// A stress scene by name.
 pub fn stress_scene(name: &str) -> Result<StressScene> {
     let Some(&(name, breaks)) = STRESS_SCENES.iter().find(|(n, _)| *n == name) else {
-        return Err(Error::InvalidScene(format!(
-            "unknown stress scene {name:?}; stress scenes are {}",
-            STRESS_SCENES
-                .iter()
-                .map(|s| s.0)
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
+        return Err(super::unknown(
+            name,
+            "stress scene",
+            STRESS_SCENES.iter().map(|s| s.0),
+        ));
     };
     let uniform = || Environment::uniform(Vec3::ONE).renamed("uniform");
     let (scene, environment) = match name {

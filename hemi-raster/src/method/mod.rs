@@ -11,15 +11,13 @@ use shadow_core::{
 };
 
 use crate::blockers::Blockers;
-use crate::config::{
-    BackfaceCulling, Config, Hierarchy, Integration, MaskResolution, NearRings, Pvs,
-};
+use crate::config::{BackfaceCulling, Config, Hierarchy, Integration, MaskResolution, Pvs};
 use crate::engine::{Engine, Lighting, UpdateProfile, with_pipeline};
 use crate::hierarchy::TwoLevel;
 use crate::pvs::VisibleSets;
 use crate::transfer::pixel_angle;
 
-const NAME: &str = "hemi-raster";
+use crate::name::NAME;
 
 /// Kautz, Lehtinen and Aila 2004: per vertex, the blocker triangles of the
 /// frame (all objects: shadows between objects come for free) are
@@ -48,8 +46,7 @@ const NAME: &str = "hemi-raster";
 /// real maps, prefer `Direct`.
 pub struct HemiRaster {
     config: Config,
-    /// What [`ShadowMethod::name`] returns: every setting that changes the
-    /// result ([`name_of`]).
+    /// What [`ShadowMethod::name`] returns ([`Config::name`]).
     name: String,
     /// Built by the first `prepare` and kept: it depends on the config only.
     engine: Option<Engine>,
@@ -82,7 +79,7 @@ impl HemiRaster {
     /// [`ShadowMethod::prepare`].
     pub fn new(config: Config) -> HemiRaster {
         HemiRaster {
-            name: name_of(&config),
+            name: config.name(),
             config,
             engine: None,
             scene: None,
@@ -220,81 +217,6 @@ impl HemiRaster {
     }
 }
 
-/// The name [`ShadowMethod::name`] documents, of `config`.
-fn name_of(config: &Config) -> String {
-    // With visible sets, the hierarchy is named against the preset's.
-    let default = match config.pvs {
-        Pvs::Off => Config::default(),
-        Pvs::Animation { .. } => Config::fast(),
-    };
-    let mut name = String::from(NAME);
-    match (config.hierarchy, default.hierarchy) {
-        (Hierarchy::Flat, _) => name.push_str("-flat"),
-        (
-            Hierarchy::TwoLevel {
-                coarse_divisor,
-                min_coarse_triangles,
-                near,
-                near_reach,
-            },
-            Hierarchy::TwoLevel {
-                coarse_divisor: d,
-                min_coarse_triangles: m,
-                near: n,
-                near_reach: r,
-            },
-        ) => {
-            if coarse_divisor != d {
-                name.push_str(&format!("-coarse{coarse_divisor}"));
-            }
-            if min_coarse_triangles != m {
-                name.push_str(&format!("-min{min_coarse_triangles}"));
-            }
-            if near != n {
-                name.push_str(match near {
-                    NearRings::One => "-ring1",
-                    NearRings::Two => "-ring2",
-                });
-            }
-            if near_reach != r {
-                name.push_str(&format!("-reach{near_reach}"));
-            }
-        }
-        (Hierarchy::TwoLevel { .. }, Hierarchy::Flat) => {}
-    }
-    match config.pvs {
-        Pvs::Off => {}
-        Pvs::Animation { stride } if stride.get() == 1 => name.push_str("-pvs"),
-        Pvs::Animation { stride } => name.push_str(&format!("-pvs{stride}")),
-    }
-    if config.mask_resolution != default.mask_resolution {
-        name.push_str(&format!(
-            "-mask{}",
-            config.mask_resolution.pixels_per_side()
-        ));
-    }
-    if config.lut_resolution != default.lut_resolution {
-        name.push_str(&format!("-table{}", config.lut_resolution));
-    }
-    if config.order != default.order {
-        name.push_str(&format!("-order{}", config.order.get()));
-    }
-    name.push_str(match config.integration {
-        Integration::ShPixels => "",
-        Integration::ShBlocks => "-blocks",
-        Integration::Direct => "-direct",
-    });
-    if config.window != default.window && config.integration != Integration::Direct {
-        name.push_str(&format!("-{}", config.window.name()));
-    }
-    name.push_str(match config.backface_culling {
-        BackfaceCulling::Auto => "",
-        BackfaceCulling::On => "-cull-all",
-        BackfaceCulling::Off => "-no-cull",
-    });
-    name
-}
-
 impl Default for HemiRaster {
     fn default() -> Self {
         HemiRaster::new(Config::default())
@@ -302,13 +224,9 @@ impl Default for HemiRaster {
 }
 
 impl ShadowMethod for HemiRaster {
-    /// `hemi-raster`, followed by a suffix for each setting that changes
-    /// the result and differs from [`Config::default`] (with visible sets,
-    /// from [`Config::fast`]), so that reports tell settings apart:
-    /// `-flat`, `-pvs` (`-pvsN` from every Nth frame), `-maskN`, `-tableN`,
-    /// `-orderN`, `-blocks`, `-direct`, `-cull-all`, `-no-cull`, and the
-    /// hierarchy's `-coarseN`, `-minN`, `-ring1`, `-reachN`. Two settings
-    /// with the same name give the same masks (the SIMD path is not named).
+    /// [`Config::name`]: `hemi-raster` and each setting that differs from
+    /// the preset it starts from (`hemi-raster:pvs:mask=16`), the name
+    /// [`Config::from_name`] builds the same settings from.
     fn name(&self) -> &str {
         &self.name
     }

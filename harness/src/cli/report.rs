@@ -1,0 +1,133 @@
+//! `harness report`: every family's sweep on every scene of a suite, and
+//! the stability atlas, written as one report.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::Args;
+
+use super::args::ScoringArgs;
+use crate::{
+    methods::{Methods, SharedGpu},
+    progress::Progress,
+    report::{self, Plan},
+    scenes::{self, SCENES, stress::STRESS_SCENES},
+    suite::{Suite, Sweep},
+};
+
+#[derive(Args, Debug)]
+pub struct ReportArgs {
+    /// How much to run: `quick` (four small scenes, a few settings a
+    /// method: minutes), `default` (every built-in scene, each method
+    /// swept over its settings), `full` (also the settings that take
+    /// minutes per frame).
+    #[arg(long, value_enum, default_value_t = Suite::Default)]
+    suite: Suite,
+    /// Shorthand for `--suite quick`.
+    #[arg(long, conflicts_with_all = ["suite", "full"])]
+    quick: bool,
+    /// Shorthand for `--suite full`.
+    #[arg(long, conflicts_with = "suite")]
+    full: bool,
+    /// Only these scenes (comma separated): built-in scenes of the suite
+    /// and stress scenes of the atlas (see `harness list`).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// More settings to run beside the suite's (comma separated method
+    /// names): each joins its family's sweep, and a family the suite does
+    /// not have gets a sweep of its own and its first setting in the atlas.
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
+    /// The folder to write index.html, report.md, report.json, report.csv,
+    /// charts/ and the strip's and atlas's images into.
+    #[arg(long, default_value = "reports")]
+    out_dir: PathBuf,
+    #[command(flatten)]
+    scoring: ScoringArgs,
+}
+
+pub fn report(args: ReportArgs, methods: &Methods, progress: &Progress) -> Result<()> {
+    let suite = match (args.quick, args.full) {
+        (true, _) => Suite::Quick,
+        (_, true) => Suite::Full,
+        _ => args.suite,
+    };
+    let plan = plan(&args, suite, methods)?;
+    let report = report::collect(&plan, &SharedGpu::new(), progress)?;
+    report.write(&args.out_dir)?;
+    println!(
+        "wrote index.html, report.md, report.json, report.csv, the charts and the images in {}",
+        args.out_dir.display()
+    );
+    if !report.failed.is_empty() {
+        bail!(
+            "{} of {} runs failed (listed in the report): {}",
+            report.failed.len(),
+            plan.run_count(),
+            report
+                .failed
+                .iter()
+                .map(|f| format!("{} on {}", f.method, f.scene))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// What `args` asks of `suite`, every name checked before any work.
+fn plan(args: &ReportArgs, suite: Suite, methods: &Methods) -> Result<Plan> {
+    let stress: Vec<&'static str> = STRESS_SCENES.iter().map(|s| s.0).collect();
+    for name in &args.scenes {
+        let builtin = SCENES.iter().any(|s| s.name == name);
+        if !builtin && !stress.contains(&name.as_str()) {
+            let names = SCENES.iter().map(|s| s.name).chain(stress.iter().copied());
+            return Err(scenes::unknown(name, "scene", names).into());
+        }
+    }
+    let chosen = |name: &str| args.scenes.is_empty() || args.scenes.iter().any(|c| c == name);
+    let scenes: Vec<&'static str> = suite.scenes().into_iter().filter(|s| chosen(s)).collect();
+    let atlas_scenes: Vec<&'static str> = suite
+        .atlas_scenes()
+        .into_iter()
+        .filter(|s| chosen(s))
+        .collect();
+    if scenes.is_empty() && atlas_scenes.is_empty() {
+        bail!(
+            "none of {:?} is a scene of the {suite:?} suite: its scenes are {}; its stress scenes {}",
+            args.scenes,
+            suite.scenes().join(", "),
+            suite.atlas_scenes().join(", ")
+        );
+    }
+    let mut sweeps = suite.families();
+    let mut atlas_settings = suite.atlas_settings();
+    for spec in methods.parse_all(&args.methods)? {
+        match sweeps.iter_mut().find(|s| s.family == spec.family()) {
+            Some(sweep) if sweep.methods.iter().any(|m| m.name() == spec.name()) => {}
+            Some(sweep) => sweep.methods.push(spec),
+            None => {
+                atlas_settings.push(spec.clone());
+                sweeps.push(Sweep {
+                    family: spec.family(),
+                    parameter: "the settings given with --methods",
+                    methods: vec![spec],
+                });
+            }
+        }
+    }
+    Ok(Plan {
+        suite,
+        scenes,
+        sweeps,
+        atlas_scenes,
+        atlas_settings,
+        vertex: args.scoring.estimator.settings(),
+        image: args.scoring.image.settings(&args.scoring.estimator),
+        image_width: args.scoring.image.image_width,
+        repeats: args.scoring.repeats,
+        cache: args.scoring.estimator.cache.clone(),
+        images: args.scoring.image.images_dir.clone(),
+        out_dir: args.out_dir.clone(),
+    })
+}

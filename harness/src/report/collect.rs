@@ -1,0 +1,263 @@
+//! Running a report: each scene's references, then every setting of every
+//! sweep on it, then the stability atlas. A setting that fails is recorded
+//! with its error and the run goes on; the page says what failed.
+
+use std::path::PathBuf;
+
+use shadow_core::{Camera, Environment, Error, Result, Scene};
+
+use super::{AtlasRun, AtlasScene, MachineInfo, Outcome, Report, ReportRun, Settings, Skipped};
+use crate::{
+    images,
+    methods::{MethodSpec, SharedGpu},
+    progress::Progress,
+    reference::{
+        ImageReference, ImageReferenceInfo, ReferenceCache, ReferenceInfo, ReferenceSettings,
+        VertexReference,
+    },
+    run::{self, References, RunResult},
+    scenes::{self, SCENES, stress},
+    suite::{STRIP_SCENE, Suite, Sweep},
+};
+
+/// What a report runs, every name already checked.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub suite: Suite,
+    /// Built-in scenes ([`SCENES`]) to run every sweep on.
+    pub scenes: Vec<&'static str>,
+    pub sweeps: Vec<Sweep>,
+    /// Stress scenes ([`stress::STRESS_SCENES`]) of the atlas.
+    pub atlas_scenes: Vec<&'static str>,
+    pub atlas_settings: Vec<MethodSpec>,
+    /// The vertex references' settings.
+    pub vertex: ReferenceSettings,
+    /// The image references' settings.
+    pub image: ReferenceSettings,
+    /// Width of the scored images (each scene camera's aspect kept).
+    pub image_width: u32,
+    pub repeats: usize,
+    pub cache: PathBuf,
+    /// Where every scene's images go, when asked.
+    pub images: Option<PathBuf>,
+    /// The report's folder: the strip's and the atlas's images go under it.
+    pub out_dir: PathBuf,
+}
+
+impl Plan {
+    /// The runs it makes.
+    pub fn run_count(&self) -> usize {
+        let settings: usize = self.sweeps.iter().map(|s| s.methods.len()).sum();
+        self.scenes.len() * settings + self.atlas_scenes.len() * self.atlas_settings.len()
+    }
+}
+
+/// A scene's references, per vertex and per pixel.
+struct SceneReferences {
+    vertex: Vec<VertexReference>,
+    info: ReferenceInfo,
+    camera: Camera,
+    image: Vec<ImageReference>,
+}
+
+impl SceneReferences {
+    fn compute(
+        scene: &Scene,
+        environment: &Environment,
+        plan: &Plan,
+        cache: &ReferenceCache,
+        progress: &Progress,
+    ) -> Result<SceneReferences> {
+        let (vertex, mut info) =
+            ReferenceInfo::compute(scene, environment, &plan.vertex, cache, progress)?;
+        let camera = scene.camera().with_width(plan.image_width)?;
+        let (image, image_info) =
+            ImageReferenceInfo::compute(scene, environment, &camera, &plan.image, cache, progress)?;
+        info.image = Some(image_info);
+        Ok(SceneReferences {
+            vertex,
+            info,
+            camera,
+            image,
+        })
+    }
+
+    fn references(&self) -> References<'_> {
+        References {
+            vertex: &self.vertex,
+            image: Some((&self.camera, &self.image)),
+        }
+    }
+}
+
+/// Runs `plan`, GPU methods on `gpu`'s device: the report, with every
+/// failure recorded in [`Report::failed`]. Fails only where nothing can be
+/// written (an image folder that cannot be written).
+pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Report> {
+    let cache = ReferenceCache::new(&plan.cache);
+    let mut report = Report {
+        machine: MachineInfo::detect(None),
+        settings: Settings {
+            suite: plan.suite,
+            target_noise: plan.vertex.target_noise.unwrap_or(0.0),
+            image_target_noise: plan.image.target_noise.unwrap_or(0.0),
+            image_width: plan.image_width,
+            repeats: plan.repeats,
+            seed: plan.vertex.seed,
+        },
+        references: Vec::new(),
+        families: plan.sweeps.clone(),
+        runs: Vec::new(),
+        skipped: Vec::new(),
+        failed: Vec::new(),
+        strip: None,
+        atlas_scenes: Vec::new(),
+        atlas: Vec::new(),
+    };
+    let overall = progress.runs(plan.run_count());
+    let failed = |report: &mut Report, method: &str, scene: &str, error: &Error| {
+        progress.say(format!("{scene}: {method} failed: {error}"));
+        report.failed.push(Skipped {
+            method: method.to_string(),
+            scene: scene.to_string(),
+            why: error.to_string(),
+        });
+    };
+    for &name in &plan.scenes {
+        overall.set_message(format!("references of {name}"));
+        let settings: usize = plan.sweeps.iter().map(|s| s.methods.len()).sum();
+        let loaded = builtin(name).and_then(|(scene, environment)| {
+            let references =
+                SceneReferences::compute(&scene, &environment, plan, &cache, progress)?;
+            Ok((scene, environment, references))
+        });
+        let (scene, environment, references) = match loaded {
+            Ok(loaded) => loaded,
+            Err(e) => {
+                failed(&mut report, "reference", name, &e);
+                overall.inc(settings as u64);
+                continue;
+            }
+        };
+        report.references.push(references.info.clone());
+        let first_run = report.runs.len();
+        for sweep in &plan.sweeps {
+            for spec in &sweep.methods {
+                overall.set_message(format!("{name}: {spec}"));
+                let ran = spec.build(gpu).and_then(|mut method| {
+                    let references = references.references();
+                    run::run(
+                        method.as_mut(),
+                        &scene,
+                        &environment,
+                        references,
+                        plan.repeats,
+                    )
+                });
+                match ran {
+                    Ok(result) => {
+                        progress.say(format!(
+                            "{name:<10} {spec:<28} error {:.2}% per vertex, {} per pixel",
+                            result.mean_error() * 100.0,
+                            result
+                                .mean_image_error()
+                                .map_or("–".into(), |e| format!("{:.2}%", e * 100.0))
+                        ));
+                        report.runs.push(ReportRun {
+                            family: sweep.family.to_string(),
+                            setting: spec.name().to_string(),
+                            result,
+                        });
+                    }
+                    Err(e @ Error::Unsupported { .. }) => report.skipped.push(Skipped {
+                        method: spec.name().to_string(),
+                        scene: name.to_string(),
+                        why: e.to_string(),
+                    }),
+                    Err(e) => failed(&mut report, spec.name(), name, &e),
+                }
+                overall.inc(1);
+            }
+        }
+        let runs: Vec<&RunResult> = report.runs[first_run..].iter().map(|r| &r.result).collect();
+        if let (Some(dir), Some(reference)) = (&plan.images, references.image.last()) {
+            images::write_scene(dir, name, &reference.image, &runs)?;
+        }
+        if let (true, Some(reference)) = (name == STRIP_SCENE, references.image.last()) {
+            images::write_scene(&plan.out_dir.join("strip"), name, &reference.image, &runs)?;
+            report.strip = Some(name.to_string());
+        }
+    }
+    for &name in &plan.atlas_scenes {
+        overall.set_message(format!("references of {name}"));
+        let loaded = stress::stress_scene(name).and_then(|stress| {
+            let references = SceneReferences::compute(
+                &stress.scene,
+                &stress.environment,
+                plan,
+                &cache,
+                progress,
+            )?;
+            Ok((stress, references))
+        });
+        let (stress, references) = match loaded {
+            Ok(loaded) => loaded,
+            Err(e) => {
+                failed(&mut report, "reference", name, &e);
+                overall.inc(plan.atlas_settings.len() as u64);
+                continue;
+            }
+        };
+        let atlas_scene = AtlasScene {
+            name: name.to_string(),
+            breaks: stress.breaks.to_string(),
+            reference: references.info.clone(),
+        };
+        let first = report.atlas.len();
+        for spec in &plan.atlas_settings {
+            overall.set_message(format!("{name}: {spec}"));
+            let ran = spec.build(gpu).and_then(|mut method| {
+                let references = references.references();
+                let (scene, environment) = (&stress.scene, &stress.environment);
+                run::run(
+                    method.as_mut(),
+                    scene,
+                    environment,
+                    references,
+                    plan.repeats,
+                )
+            });
+            let outcome = match ran {
+                Ok(result) => Outcome::Ran(Box::new(result)),
+                Err(e) => Outcome::Refused(e.to_string()),
+            };
+            let entry = AtlasRun::new(&atlas_scene, spec, outcome, &report.runs);
+            progress.say(format!("{name:<16} {}", entry.diagnosis));
+            report.atlas.push(entry);
+            overall.inc(1);
+        }
+        let runs: Vec<&RunResult> = report.atlas[first..]
+            .iter()
+            .filter_map(|a| match &a.outcome {
+                Outcome::Ran(r) => Some(r.as_ref()),
+                Outcome::Refused(_) => None,
+            })
+            .collect();
+        if let Some(reference) = references.image.last() {
+            images::write_scene(&plan.out_dir.join("atlas"), name, &reference.image, &runs)?;
+        }
+        report.atlas_scenes.push(atlas_scene);
+    }
+    overall.finish_and_clear();
+    report.machine.adapter = gpu.adapter();
+    Ok(report)
+}
+
+/// Built-in scene `name` and its own environment.
+fn builtin(name: &str) -> Result<(Scene, Environment)> {
+    let environment = SCENES
+        .iter()
+        .find(|s| s.name == name)
+        .map_or("uniform", |s| s.environment);
+    Ok((scenes::builtin(name)?, scenes::environment(environment)?))
+}
