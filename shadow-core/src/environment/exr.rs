@@ -8,10 +8,9 @@
 //! scan lines: the `exr` default (RLE in 64×64 tiles) barely compresses float
 //! data.
 
-use std::fs::{self, File, OpenOptions};
+use std::fs;
 use std::io::{BufWriter, Cursor};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::Path;
 
 use ::exr::prelude::{
     Encoding, Image, Layer, LayerAttributes, ReadChannels, ReadLayers, SpecificChannels,
@@ -121,8 +120,16 @@ impl Environment {
                 (t.x, t.y, t.z)
             }),
         );
-        let (temp, file) = TempFile::create_beside(path)?;
-        let mut writer = BufWriter::new(file);
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let mut builder = tempfile::Builder::new();
+        // Readable by all, as a file created directly would be.
+        #[cfg(unix)]
+        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
+        let temp = builder.tempfile_in(dir).map_err(|e| Error::io(path, e))?;
+        let mut writer = BufWriter::new(temp);
         Image::from_layer(layer)
             .write()
             .to_buffered(&mut writer)
@@ -130,62 +137,12 @@ impl Environment {
                 ::exr::error::Error::Io(io) => Error::io(path, io),
                 other => Error::format(path, format!("could not encode OpenEXR ({other})")),
             })?;
-        let file = writer
+        let temp = writer
             .into_inner()
             .map_err(|e| Error::io(path, e.into_error()))?;
-        file.sync_all().map_err(|e| Error::io(path, e))?;
-        drop(file);
-        temp.persist(path)
-    }
-}
-
-/// A file next to the target that is removed unless it is renamed into place.
-struct TempFile {
-    path: PathBuf,
-    persisted: bool,
-}
-
-impl TempFile {
-    /// Creates a fresh, uniquely named hidden file in `target`'s directory
-    /// (the same file system, so the final rename is atomic).
-    fn create_beside(target: &Path) -> Result<(TempFile, File)> {
-        static COUNTER: AtomicU64 = AtomicU64::new(0);
-        let dir = match target.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        let stem = target
-            .file_name()
-            .ok_or_else(|| Error::format(target, "not a file path"))?
-            .to_string_lossy();
-        let unique = COUNTER.fetch_add(1, Ordering::Relaxed);
-        let path = dir.join(format!(".{stem}.{}.{unique}.tmp", std::process::id()));
-        let file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&path)
-            .map_err(|e| Error::io(target, e))?;
-        let temp = TempFile {
-            path,
-            persisted: false,
-        };
-        Ok((temp, file))
-    }
-
-    fn persist(mut self, target: &Path) -> Result<()> {
-        fs::rename(&self.path, target).map_err(|e| Error::io(target, e))?;
-        self.persisted = true;
+        temp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+        temp.persist(path).map_err(|e| Error::io(path, e.error))?;
         Ok(())
-    }
-}
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        if !self.persisted {
-            // Best effort: the temporary name is hidden and unique, and the
-            // error that got us here is the one worth reporting.
-            let _ = fs::remove_file(&self.path);
-        }
     }
 }
 
@@ -194,6 +151,7 @@ mod tests {
     use super::*;
     use crate::environment::luminance;
     use ::exr::prelude::{f16, write_rgb_file, write_rgba_file};
+    use std::path::PathBuf;
 
     fn asset_dir() -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/environments")
