@@ -39,7 +39,7 @@ use std::{
 use serde::{Deserialize, Serialize};
 use shadow_core::{Error, Result};
 
-use crate::io::write_json_atomic;
+use crate::{io::write_json_atomic, report::Table};
 
 /// The file, in a group's directory, that holds its benchmarks' errors.
 pub const ERRORS_FILE: &str = "errors.json";
@@ -469,15 +469,6 @@ fn markdown_cell(text: &str) -> String {
     text.replace('|', "\\|").replace(['\n', '\r'], " ")
 }
 
-/// A CSV field, quoted when it holds a comma, quote or line break.
-fn csv_field(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
-    } else {
-        text.to_string()
-    }
-}
-
 impl BenchTable {
     /// Every measurement, section by section, row by row.
     pub fn measurements(&self) -> impl Iterator<Item = (&Section, &Row, &str, &Measurement)> {
@@ -531,31 +522,37 @@ impl BenchTable {
             if i > 0 {
                 s.push('\n');
             }
-            let header: Vec<String> = std::iter::once(markdown_cell(&section.name))
-                .chain(section.columns.iter().map(|c| {
-                    if c.is_empty() {
-                        "time".to_string()
-                    } else {
-                        markdown_cell(c)
-                    }
-                }))
-                .collect();
-            let _ = writeln!(s, "| {} |", header.join(" | "));
-            let _ = writeln!(s, "|---|{}", "---:|".repeat(section.columns.len()));
-            for row in &section.rows {
-                let cells: Vec<String> = std::iter::once(markdown_cell(&row.name))
-                    .chain(row.cells.iter().map(|cell| match cell {
-                        None => "–".to_string(),
-                        Some(m) => match m.error {
-                            Some(error) => {
-                                format!("{} · {}", format_time(&m.median), format_error(error))
-                            }
-                            None => format_time(&m.median),
-                        },
+            let mut table = Table {
+                header: std::iter::once(section.name.clone())
+                    .chain(section.columns.iter().map(|c| {
+                        if c.is_empty() {
+                            "time".to_string()
+                        } else {
+                            c.clone()
+                        }
                     }))
-                    .collect();
-                let _ = writeln!(s, "| {} |", cells.join(" | "));
+                    .collect(),
+                numeric: std::iter::once(false)
+                    .chain(section.columns.iter().map(|_| true))
+                    .collect(),
+                rows: Vec::new(),
+            };
+            for row in &section.rows {
+                table.row(
+                    std::iter::once(row.name.clone())
+                        .chain(row.cells.iter().map(|cell| match cell {
+                            None => "–".to_string(),
+                            Some(m) => match m.error {
+                                Some(error) => {
+                                    format!("{} · {}", format_time(&m.median), format_error(error))
+                                }
+                                None => format_time(&m.median),
+                            },
+                        }))
+                        .collect(),
+                );
             }
+            s.push_str(&table.markdown());
         }
         s
     }
@@ -564,25 +561,31 @@ impl BenchTable {
     /// median_ns,lower_ns,upper_ns,confidence_level,error` (`error` a
     /// fraction, empty where none was recorded).
     pub fn csv(&self) -> String {
-        let mut s = String::from(
-            "section,row,column,id,median_ns,lower_ns,upper_ns,confidence_level,error\n",
-        );
+        let mut table = Table::new(&[
+            "section",
+            "row",
+            "column",
+            "id",
+            "median_ns",
+            "lower_ns",
+            "upper_ns",
+            "confidence_level",
+            "error",
+        ]);
         for (section, row, column, m) in self.measurements() {
-            let _ = writeln!(
-                s,
-                "{},{},{},{},{},{},{},{},{}",
-                csv_field(&section.name),
-                csv_field(&row.name),
-                csv_field(column),
-                csv_field(&m.id),
-                m.median.point,
-                m.median.lower,
-                m.median.upper,
-                m.median.confidence_level,
+            table.row(vec![
+                section.name.clone(),
+                row.name.clone(),
+                column.to_string(),
+                m.id.clone(),
+                m.median.point.to_string(),
+                m.median.lower.to_string(),
+                m.median.upper.to_string(),
+                m.median.confidence_level.to_string(),
                 m.error.map_or(String::new(), |e| e.to_string()),
-            );
+            ]);
         }
-        s
+        table.csv()
     }
 }
 

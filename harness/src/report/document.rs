@@ -52,10 +52,32 @@ impl Table {
         self.rows.push(cells);
     }
 
+    /// The table as Markdown: numeric columns right-aligned, `|` escaped
+    /// and line breaks as spaces in every cell.
+    pub fn markdown(&self) -> String {
+        let cell = |c: &String| c.replace('|', "\\|").replace(['\n', '\r'], " ");
+        let line = |row: &[String]| {
+            let cells: Vec<String> = row.iter().map(cell).collect();
+            format!("| {} |\n", cells.join(" | "))
+        };
+        let align: Vec<&str> = (0..self.header.len())
+            .map(|c| match self.numeric.get(c) {
+                Some(true) => "---:",
+                _ => "---",
+            })
+            .collect();
+        let mut out = line(&self.header);
+        let _ = writeln!(out, "|{}|", align.join("|"));
+        for row in &self.rows {
+            out.push_str(&line(row));
+        }
+        out
+    }
+
     /// The table as CSV (RFC 4180 quoting).
     pub fn csv(&self) -> String {
         let quote = |s: &String| {
-            if s.contains([',', '"', '\n']) {
+            if s.contains([',', '"', '\n', '\r']) {
                 format!("\"{}\"", s.replace('"', "\"\""))
             } else {
                 s.clone()
@@ -99,22 +121,7 @@ impl Document {
                     s.push('\n');
                 }
                 Block::Table(t) => {
-                    let _ = writeln!(s, "| {} |", t.header.join(" | "));
-                    let align: Vec<&str> = (0..t.header.len())
-                        .map(|c| {
-                            if t.numeric.get(c) == Some(&true) {
-                                "---:"
-                            } else {
-                                "---"
-                            }
-                        })
-                        .collect();
-                    let _ = writeln!(s, "|{}|", align.join("|"));
-                    for row in &t.rows {
-                        let cells: Vec<String> =
-                            row.iter().map(|c| c.replace('|', "\\|")).collect();
-                        let _ = writeln!(s, "| {} |", cells.join(" | "));
-                    }
+                    s.push_str(&t.markdown());
                     s.push('\n');
                 }
                 Block::Figures(figures) if figures.len() == 1 => {
