@@ -30,7 +30,7 @@
 //! when `meta["cosine_normalized"]`, each row is then scaled by
 //! π / Σ_j weights_j max(0, n·l_j), as the method shades.
 
-use std::{fmt::Write, path::Path};
+use std::path::Path;
 
 use glam::Vec3;
 use serde::Serialize;
@@ -39,6 +39,7 @@ use shadow_core::{Error, Export, FrameGeometry, Result, Scene, VertexRadiance};
 use crate::{
     io::write_atomic,
     npz::{self, Array},
+    report::Table,
 };
 
 /// One vertex's row.
@@ -70,21 +71,19 @@ pub fn write_vertices(path: &Path, frame: &FrameGeometry, values: &VertexRadianc
     }
     let bytes = match path.extension().and_then(|e| e.to_str()) {
         Some("csv") => {
-            let mut s = String::from("object,vertex,px,py,pz,nx,ny,nz,r,g,b,se_r,se_g,se_b\n");
+            let mut table = Table::new(&[
+                "object", "vertex", "px", "py", "pz", "nx", "ny", "nz", "r", "g", "b", "se_r",
+                "se_g", "se_b",
+            ]);
             for r in &rows {
-                let se = r.std_error.map(Vec3::from_array);
-                let se = se.map_or(",,".to_string(), |e| format!("{},{},{}", e.x, e.y, e.z));
-                let [px, py, pz] = r.position;
-                let [nx, ny, nz] = r.normal;
-                let [cr, cg, cb] = r.radiance;
-                writeln!(
-                    s,
-                    "{},{},{px},{py},{pz},{nx},{ny},{nz},{cr},{cg},{cb},{se}",
-                    r.object, r.vertex
-                )
-                .expect("write to String");
+                let mut cells = vec![r.object.to_string(), r.vertex.to_string()];
+                let numbers = r.position.iter().chain(&r.normal).chain(&r.radiance);
+                cells.extend(numbers.map(f32::to_string));
+                let se = r.std_error.map(|e| e.map(|x| x.to_string()));
+                cells.extend(se.unwrap_or_default());
+                table.row(cells);
             }
-            s.into_bytes()
+            table.csv().into_bytes()
         }
         Some("json") => {
             serde_json::to_vec(&rows).map_err(|e| Error::format(path, e.to_string()))?
