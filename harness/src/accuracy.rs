@@ -860,6 +860,15 @@ mod tests {
     use std::sync::Arc;
 
     use approx::assert_relative_eq;
+
+    /// Every default row is listed under the name its method prints, so
+    /// that `--methods` naming it finds its description.
+    #[test]
+    fn the_default_rows_are_named_as_their_methods_print() {
+        for variant in variants() {
+            assert!(!variant.what.is_empty(), "{}", variant.spec);
+        }
+    }
     use shadow_core::{Camera, Object};
 
     use super::*;

@@ -123,9 +123,9 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             why: error.to_string(),
         });
     };
+    let settings: usize = plan.sweeps.iter().map(|s| s.methods.len()).sum();
     for &name in &plan.scenes {
         overall.set_message(format!("references of {name}"));
-        let settings: usize = plan.sweeps.iter().map(|s| s.methods.len()).sum();
         let loaded = builtin(name).and_then(|(scene, environment)| {
             let references =
                 SceneReferences::compute(&scene, &environment, plan, &cache, progress)?;
