@@ -1,6 +1,6 @@
 //! Which occlusion maps a frame needs, where each lies and how much it is
 //! blurred (§4.2.2, eq. 5–6), planned on the CPU; the GPU renders and blurs
-//! them (`gpu.rs`).
+//! them (`gpu/map_pass.rs`).
 //!
 //! For light i, occluder group A and receiver B, A's shadow is projected
 //! along ω_i onto the plane H_B through B's centre, and a point p of B reads
@@ -24,21 +24,24 @@
 //! darken the object for lights above. Pairs whose blurred shadow cannot
 //! reach the receiver are skipped.
 
-use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3, Vec4};
 use shadow_core::Aabb;
 
 use crate::groups::Groups;
 use crate::lights::AreaLight;
 
-/// `Light` in the shaders: direction, radiosity and the plane's axes.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuLight {
-    pub direction: Vec4,
-    pub radiosity: Vec4,
-    pub u: Vec4,
-    pub v: Vec4,
+shadow_core::wgsl_struct! {
+    /// An area light W_i (§4.2.1) as the shaders read it: direction ω_i (w:
+    /// solid angle Ω_i), radiosity B_i, and the axes (u, v) of planes
+    /// perpendicular to ω_i.
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct GpuLight {
+        pub direction: Vec4,
+        pub radiosity: Vec4,
+        pub u: Vec4,
+        pub v: Vec4,
+    }
 }
 
 impl GpuLight {
@@ -57,24 +60,27 @@ impl GpuLight {
     }
 }
 
-/// `Map` in the shaders: one occlusion map's window and blur.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub struct MapWindow {
-    /// The window's centre in the light's plane, (p·u, p·v).
-    pub centre: Vec2,
-    /// 1 / the window's side, world units.
-    pub inverse_side: f32,
-    /// The box's side s, in texels.
-    pub blur: f32,
-    pub light: u32,
-    /// The occluder group.
-    pub occluder: u32,
-    /// The receiving group.
-    pub receiver: u32,
-    /// Where the map is drawn: its tile in its batch of the atlas (set by
-    /// the GPU side for the maps it draws).
-    pub tile: u32,
+shadow_core::wgsl_struct! {
+    /// One occlusion map as the shaders read it: its window in the light's
+    /// plane, its blur, and which light, occluder group and receiver it is for.
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct MapWindow {
+        /// The window's centre in the light's plane, (p·u, p·v).
+        pub centre: Vec2,
+        /// 1 / the window's side, world units.
+        pub inverse_side: f32,
+        /// The box's side s, in texels.
+        pub blur: f32,
+        pub light: u32,
+        /// The occluder group.
+        pub occluder: u32,
+        /// The receiving group.
+        pub receiver: u32,
+        /// Where the map is drawn: its tile in its batch of the atlas (set by
+        /// the GPU side for the maps it draws).
+        pub tile: u32,
+    }
 }
 
 /// Every map of a frame, sorted by receiving group and then light, with the

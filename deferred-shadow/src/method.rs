@@ -148,7 +148,7 @@ impl DeferredShadow {
 
     /// The occlusion maps of the current frame.
     pub fn map_count(&self) -> Option<u32> {
-        self.scene.as_ref().map(|s| s.gpu.map_count)
+        self.scene.as_ref().map(|s| s.gpu.map_count())
     }
 
     /// The occluder groups: the group of each object.

@@ -6,11 +6,12 @@
 //! back to the CPU, which keeps the lists.
 
 use glam::Mat4;
+use shadow_core::gpu::binding::{entry, group, group_layout, uniform};
+use shadow_core::gpu::buffer::blank;
+use shadow_core::gpu::depth::{DEPTH_FORMAT, DepthOnly, DepthUse, OcclusionQueries, depth_pass};
 use shadow_core::{Camera, Result, gpu::GpuContext, raster};
 
-use crate::visibility::{Geometry, QUERIES_PER_PASS};
-
-const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+use crate::visibility::Geometry;
 
 /// The unseen list and the camera pass that shortens it.
 pub struct CameraFilter {
@@ -19,8 +20,7 @@ pub struct CameraFilter {
     group: wgpu::BindGroup,
     camera: wgpu::Buffer,
     triangles: wgpu::Buffer,
-    samples: wgpu::Buffer,
-    queries: wgpu::QuerySet,
+    queries: OcclusionQueries,
     depth: Option<(u32, u32, wgpu::TextureView)>,
     /// Per triangle: still in U.
     unseen: Vec<bool>,
@@ -33,82 +33,37 @@ impl CameraFilter {
     /// The pipelines, and U holding every one of the `triangles` (indices
     /// into the geometry's positions, three per triangle).
     pub fn new(ctx: &GpuContext, triangles: &[u32]) -> CameraFilter {
-        let device = &ctx.device;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("camera"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/camera.wgsl").into()),
-        });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("camera"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: None,
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |write: bool| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("camera"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: 16,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![0 => Float32x4],
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH,
-                    depth_write_enabled: Some(write),
-                    depth_compare: Some(if write {
-                        wgpu::CompareFunction::Less
-                    } else {
-                        wgpu::CompareFunction::LessEqual
-                    }),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: None,
-                multiview_mask: None,
-                cache: None,
-            })
-        };
-        let camera = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("camera"),
-            size: 64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("camera"),
+                source: wgpu::ShaderSource::Wgsl(include_str!("shaders/camera.wgsl").into()),
+            });
+        let layout = group_layout(ctx, "camera", &[uniform(0, wgpu::ShaderStages::VERTEX)]);
+        let pipeline = DepthOnly {
+            module: &module,
+            entry: "main",
             layout: &layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: camera.as_entire_binding(),
-            }],
-        });
+            buffers: &[Some(Geometry::buffer_layout(0))],
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            bias: Default::default(),
+        };
+        let camera = blank(
+            ctx,
+            "camera",
+            64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        let group = group(
+            ctx,
+            "camera",
+            &layout,
+            &[entry(0, camera.as_entire_binding())],
+        );
         let count = triangles.len() / 3;
         CameraFilter {
-            prepass: pipeline(true),
-            queries_pipeline: pipeline(false),
+            prepass: pipeline.pipeline(ctx, DepthUse::Write),
+            queries_pipeline: pipeline.pipeline(ctx, DepthUse::Test),
             group,
             camera,
             triangles: ctx.create_buffer_init(
@@ -116,17 +71,12 @@ impl CameraFilter {
                 triangles,
                 wgpu::BufferUsages::INDEX,
             ),
-            samples: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("triangle samples"),
-                size: (8 * count.next_multiple_of(QUERIES_PER_PASS)).max(16) as u64,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            }),
-            queries: device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("triangle queries"),
-                ty: wgpu::QueryType::Occlusion,
-                count: QUERIES_PER_PASS as u32,
-            }),
+            queries: OcclusionQueries::new(
+                ctx,
+                "triangle queries",
+                count,
+                wgpu::BufferUsages::COPY_SRC,
+            ),
             depth: None,
             unseen: vec![true; count],
             remaining: count,
@@ -211,7 +161,7 @@ impl CameraFilter {
             let texture = ctx.create_texture_2d(
                 "camera depth",
                 (width, height),
-                DEPTH,
+                DEPTH_FORMAT,
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
             );
             self.depth = Some((width, height, texture.create_view(&Default::default())));
@@ -221,53 +171,30 @@ impl CameraFilter {
         ctx.queue
             .write_buffer(&self.camera, 0, bytemuck::bytes_of(&clip));
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        let attachment = |load| wgpu::RenderPassDepthStencilAttachment {
-            view,
-            depth_ops: Some(wgpu::Operations {
-                load,
-                store: wgpu::StoreOp::Store,
-            }),
-            stencil_ops: None,
-        };
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("camera depth"),
-                color_attachments: &[],
-                depth_stencil_attachment: Some(attachment(wgpu::LoadOp::Clear(1.0))),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let clear = wgpu::LoadOp::Clear(1.0);
+            let mut pass = depth_pass(&mut encoder, "camera depth", view, clear, None);
             pass.set_pipeline(&self.prepass);
             pass.set_bind_group(0, &self.group, &[]);
             pass.set_vertex_buffer(0, geometry.positions.slice(..));
             pass.set_index_buffer(self.triangles.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..3 * self.unseen.len() as u32, 0, 0..1);
         }
-        for (chunk, part) in candidates.chunks(QUERIES_PER_PASS).enumerate() {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("triangle queries"),
-                color_attachments: &[],
-                depth_stencil_attachment: Some(attachment(wgpu::LoadOp::Load)),
-                timestamp_writes: None,
-                occlusion_query_set: Some(&self.queries),
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&self.queries_pipeline);
-            pass.set_bind_group(0, &self.group, &[]);
-            pass.set_vertex_buffer(0, geometry.positions.slice(..));
-            pass.set_index_buffer(self.triangles.slice(..), wgpu::IndexFormat::Uint32);
-            for (query, &t) in part.iter().enumerate() {
-                pass.begin_occlusion_query(query as u32);
-                pass.draw_indexed(3 * t..3 * t + 3, 0, 0..1);
-                pass.end_occlusion_query();
-            }
-            drop(pass);
-            let offset = (chunk * QUERIES_PER_PASS * 8) as u64;
-            encoder.resolve_query_set(&self.queries, 0..part.len() as u32, &self.samples, offset);
-        }
+        self.queries.record(
+            &mut encoder,
+            "triangle queries",
+            view,
+            candidates,
+            |pass| {
+                pass.set_pipeline(&self.queries_pipeline);
+                pass.set_bind_group(0, &self.group, &[]);
+                pass.set_vertex_buffer(0, geometry.positions.slice(..));
+                pass.set_index_buffer(self.triangles.slice(..), wgpu::IndexFormat::Uint32);
+            },
+            |pass, t| pass.draw_indexed(3 * t..3 * t + 3, 0, 0..1),
+        );
         ctx.queue.submit([encoder.finish()]);
-        ctx.read_buffer(&self.samples, 0, candidates.len())
+        ctx.read_buffer(self.queries.samples(), 0, candidates.len())
     }
 }
 

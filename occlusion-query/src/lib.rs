@@ -19,4 +19,4 @@ pub use config::{Config, DepthOffset, Filtering, Normalization, Occluder, Vertex
 pub use lightsphere::{Level, Lightsphere, Orientation, Weights};
 pub use method::OcclusionQuery;
 pub use views::{Atlas, orthographic, texel};
-pub use visibility::{QUERIES_PER_PASS, TestOffset};
+pub use visibility::TestOffset;

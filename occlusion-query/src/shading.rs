@@ -2,30 +2,41 @@
 //! c_i = Σ_j M_ij I_j, with the BRDF and the directions' weights inside the
 //! sum (shade.wgsl).
 
-use bytemuck::{Pod, Zeroable};
 use glam::{Vec3, Vec4};
+use shadow_core::gpu::binding::{compute_pipeline, entry, group, group_layout, storage, uniform};
+use shadow_core::gpu::buffer::blank;
+use shadow_core::gpu::wgsl::Source;
 use shadow_core::{Brdf, gpu::GpuContext};
 
+use crate::views::GpuDirection;
 use crate::visibility::{Geometry, Visibility};
-use shadow_core::gpu::uniforms::storage;
 
-/// `Shade` in shade.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct ShadeBlock {
-    vertices: u32,
-    directions: u32,
-    words: u32,
-    normalize: u32,
-    eye: Vec4,
+shadow_core::wgsl_struct! {
+    /// One shading's parameters, as shade.wgsl reads them.
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+    struct Shade {
+        vertices: u32,
+        /// Directions in use: the first `directions` of the lightsphere.
+        directions: u32,
+        words: u32,
+        /// 1: scale by π / Σ_j w_j max(0, n·l_j).
+        normalize: u32,
+        /// The viewer, in the space of the positions.
+        eye: Vec4,
+    }
 }
 
-/// `Material` in shade.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct GpuMaterial {
-    diffuse: Vec4,
-    specular: Vec4,
+shadow_core::wgsl_struct! {
+    /// An object's BRDF, as shade.wgsl reads it.
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+    struct GpuMaterial {
+        /// Diffuse albedo ρ_d (rgb).
+        diffuse: Vec4,
+        /// Specular albedo ρ_s (rgb) and the Phong exponent (w).
+        specular: Vec4,
+    }
 }
 
 impl GpuMaterial {
@@ -75,86 +86,46 @@ impl Shading {
         objects: Vec<u32>,
         directions: usize,
     ) -> Shading {
-        let device = &ctx.device;
         let compute = wgpu::ShaderStages::COMPUTE;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("shade"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: compute,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(1, true, compute),
-                storage(2, true, compute),
-                storage(3, true, compute),
-                storage(4, true, compute),
-                storage(5, true, compute),
-                storage(6, true, compute),
-                storage(7, true, compute),
-                storage(8, false, compute),
-            ],
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("shade"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/shade.wgsl").into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("shade"),
-            layout: Some(
-                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: None,
-                    bind_group_layouts: &[Some(&layout)],
-                    immediate_size: 0,
-                }),
-            ),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let buffer = |label, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let mut entries = vec![uniform(0, compute)];
+        entries.extend((1..=7).map(|b| storage(b, true, compute)));
+        entries.push(storage(8, false, compute));
+        let layout = group_layout(ctx, "shade", &entries);
+        let module = Source::new()
+            .declare::<Shade>()
+            .declare::<GpuDirection>()
+            .declare::<GpuMaterial>()
+            .body(include_str!("shaders/shade.wgsl"))
+            .module(ctx, "shade");
+        let pipeline = compute_pipeline(ctx, &layout, &module, "main");
         let write = wgpu::BufferUsages::COPY_DST;
-        let params = buffer(
+        let storage = wgpu::BufferUsages::STORAGE;
+        let params = blank(
+            ctx,
             "shade",
-            size_of::<ShadeBlock>() as u64,
+            size_of::<Shade>() as u64,
             wgpu::BufferUsages::UNIFORM | write,
         );
-        let incoming = buffer(
-            "incoming",
-            16 * directions as u64,
-            wgpu::BufferUsages::STORAGE | write,
-        );
-        let vertex_info = buffer(
+        let incoming = blank(ctx, "incoming", 16 * directions as u64, storage | write);
+        let vertex_info = blank(
+            ctx,
             "vertex info",
             4 * geometry.vertices as u64,
-            wgpu::BufferUsages::STORAGE | write,
+            storage | write,
         );
-        let radiance = buffer(
+        let radiance = blank(
+            ctx,
             "radiance",
             16 * geometry.vertices as u64,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            storage | wgpu::BufferUsages::COPY_SRC,
         );
         let gpu_materials: Vec<GpuMaterial> = materials.iter().map(GpuMaterial::new).collect();
-        let materials =
-            ctx.create_buffer_init("materials", &gpu_materials, wgpu::BufferUsages::STORAGE);
-        let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("shade"),
-            layout: &layout,
-            entries: &[
+        let materials = ctx.create_buffer_init("materials", &gpu_materials, storage);
+        let group = group(
+            ctx,
+            "shade",
+            &layout,
+            &[
                 entry(0, params.as_entire_binding()),
                 entry(1, directions_buffer.as_entire_binding()),
                 entry(2, incoming.as_entire_binding()),
@@ -165,7 +136,7 @@ impl Shading {
                 entry(7, vertex_info.as_entire_binding()),
                 entry(8, radiance.as_entire_binding()),
             ],
-        });
+        );
         Shading {
             pipeline,
             group,
@@ -213,7 +184,7 @@ impl Shading {
         normalize: bool,
         eye: Vec3,
     ) {
-        let block = ShadeBlock {
+        let block = Shade {
             vertices: self.vertices as u32,
             directions: directions as u32,
             words,
@@ -225,7 +196,7 @@ impl Shading {
         // recorded into one encoder would both read the last eye.
         let staging =
             ctx.create_buffer_init("shade parameters", &[block], wgpu::BufferUsages::COPY_SRC);
-        encoder.copy_buffer_to_buffer(&staging, 0, &self.params, 0, size_of::<ShadeBlock>() as u64);
+        encoder.copy_buffer_to_buffer(&staging, 0, &self.params, 0, size_of::<Shade>() as u64);
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.group, &[]);

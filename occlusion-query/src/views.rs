@@ -2,20 +2,21 @@
 //! fitted to the scene's bounding sphere) and where it sits in the atlas the
 //! maps of a batch of directions share.
 
-use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::lightsphere::Lightsphere;
 
-/// One direction as the shaders read it (`Direction` in the WGSL).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub struct GpuDirection {
-    /// World (or model) space to the clip space of the direction's map.
-    pub clip_from_world: Mat4,
-    /// Toward the light (xyz); w is padding (a direction's weight depends on
-    /// the level shaded, and travels with the incoming radiance).
-    pub light: Vec4,
+shadow_core::wgsl_struct! {
+    /// One direction as the shaders read it.
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct GpuDirection {
+        /// World (or model) space to the clip space of the direction's map.
+        pub clip_from_world: Mat4,
+        /// Toward the light (xyz); w is padding (a direction's weight depends
+        /// on the level shaded, and travels with the incoming radiance).
+        pub light: Vec4,
+    }
 }
 
 /// The orthographic view of a sphere (`centre`, `radius`) from direction

@@ -6,26 +6,14 @@
 // Occlusion ratios of several occluder groups combine as Soler and Sillion's
 // product of visibilities: O = 1 − Π_g (1 − O_g).
 
-struct Params {
-    eye: vec4<f32>,
-    lights: u32,
-    resolution: u32,
-    self_visibility: u32,
-    vertices: u32,
-    width: u32,
-    height: u32,
-    // Floats per vertex in `shading`: L_s (4), then one weight per light.
-    stride: u32,
-    // Where the triangles' masks start in `culling`.
-    masks: u32,
-}
+// Params is declared from Rust (gpu/deferred_pass.rs).
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> vertices: array<Vertex>;
+@group(0) @binding(1) var<storage, read> vertices: array<GpuVertex>;
 @group(0) @binding(2) var<storage, read> triangles: array<vec4<u32>>;
-@group(0) @binding(3) var<storage, read> objects: array<Object>;
-@group(0) @binding(4) var<uniform> lights: array<Light, MAX_LIGHTS>;
-@group(0) @binding(5) var<storage, read> maps: array<Map>;
+@group(0) @binding(3) var<storage, read> objects: array<GpuObject>;
+@group(0) @binding(4) var<uniform> lights: array<GpuLight, MAX_LIGHTS>;
+@group(0) @binding(5) var<storage, read> maps: array<MapWindow>;
 // Which maps a point reads: first, per receiving group and light, the
 // range [first, count] of its maps (2 words each); then, from
 // `params.masks`, per triangle and light, a bit per map of that range whose
@@ -38,11 +26,11 @@ struct Params {
 @group(0) @binding(10) var image: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(11) var<storage, read_write> vertex_radiance: array<vec4<f32>>;
 
-fn world_position(o: Object, v: u32) -> vec3<f32> {
+fn world_position(o: GpuObject, v: u32) -> vec3<f32> {
     return (o.model * model_position(vertices[v])).xyz;
 }
 
-fn world_normal(o: Object, v: u32) -> vec3<f32> {
+fn world_normal(o: GpuObject, v: u32) -> vec3<f32> {
     return (o.normal * vec4<f32>(vertices[v].normal.xyz, 0.0)).xyz;
 }
 
@@ -76,7 +64,7 @@ fn map_at(k: u32, a: vec2<f32>) -> f32 {
 
 // O_i(p) for receiving group `receiver`: the maps of `mask` (bit j: the
 // range's j-th map; bit 31: the 32nd and later), combined.
-fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light, mask: u32) -> f32 {
+fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: GpuLight, mask: u32) -> f32 {
     let at = 2u * (receiver * params.lights + i);
     let first = culling[at];
     let count = culling[at + 1u];
@@ -101,7 +89,7 @@ fn occlusion(receiver: u32, i: u32, p: vec3<f32>, light: Light, mask: u32) -> f3
 }
 
 // f_r(ω_i, ω_o): Lambert, or normalized Phong about the mirror of ω_o.
-fn brdf(o: Object, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
+fn brdf(o: GpuObject, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
     var f = o.diffuse.xyz / PI;
     if any(o.specular.xyz > vec3<f32>(0.0)) {
         let e = o.specular.w;

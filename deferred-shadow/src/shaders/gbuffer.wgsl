@@ -1,14 +1,12 @@
 // The visible surface at each pixel (§6.2.2): its world position, as bits,
 // and its triangle plus one (zero: background), in an rgba32uint target.
 
-struct View {
-    clip_from_world: mat4x4<f32>,
-}
+// View is declared from Rust (gpu/deferred_pass.rs).
 
 @group(0) @binding(0) var<uniform> view: View;
-@group(0) @binding(1) var<storage, read> vertices: array<Vertex>;
+@group(0) @binding(1) var<storage, read> vertices: array<GpuVertex>;
 @group(0) @binding(2) var<storage, read> triangles: array<vec4<u32>>;
-@group(0) @binding(3) var<storage, read> objects: array<Object>;
+@group(0) @binding(3) var<storage, read> objects: array<GpuObject>;
 
 struct Surface {
     @builtin(position) clip: vec4<f32>,

@@ -2,18 +2,13 @@
 // their tile of an atlas, then convolved with a box (eq. 5–6) by running
 // sums, rows then columns, into one array of maps.
 
-struct Atlas {
-    resolution: u32,
-    per_row: u32,
-    side: f32,
-    first: u32,
-}
+// Atlas is declared from Rust (gpu/map_pass.rs).
 
 @group(0) @binding(0) var<uniform> atlas: Atlas;
-@group(0) @binding(1) var<storage, read> vertices: array<Vertex>;
-@group(0) @binding(3) var<storage, read> objects: array<Object>;
-@group(0) @binding(4) var<uniform> lights: array<Light, MAX_LIGHTS>;
-@group(0) @binding(5) var<storage, read> maps: array<Map>;
+@group(0) @binding(1) var<storage, read> vertices: array<GpuVertex>;
+@group(0) @binding(3) var<storage, read> objects: array<GpuObject>;
+@group(0) @binding(4) var<uniform> lights: array<GpuLight, MAX_LIGHTS>;
+@group(0) @binding(5) var<storage, read> maps: array<MapWindow>;
 @group(0) @binding(6) var<storage, read> instances: array<u32>;
 
 struct Covered {

@@ -3,36 +3,11 @@
 // set where the vertex passes (the occlusion query's LessEqual) and faces
 // the light.
 
-struct Direction {
-    clip_from_world: mat4x4<f32>,
-    light: vec4<f32>,
-}
-
-struct Batch {
-    // Listed vertices to test.
-    vertices: u32,
-    // Directions first .. first + count, whose maps sit in the atlas from
-    // slot 0 on, row by row.
-    first: u32,
-    count: u32,
-    // 32-bit words of visibility per vertex.
-    words: u32,
-    // Side of one map, and maps per atlas row.
-    map: u32,
-    grid: u32,
-    _pad: vec2<u32>,
-    // World distances each tested vertex moves toward the light and along
-    // its normal.
-    toward_light: f32,
-    along_normal: f32,
-    // World distance per unit of tan θ (θ between the vertex normal and
-    // the light) the vertex moves toward the light, at most `max_tan` of it.
-    slope: f32,
-    max_tan: f32,
-}
+// GpuDirection, TestOffset and Batch are declared from Rust (views.rs,
+// visibility/mod.rs, visibility/compare.rs).
 
 @group(0) @binding(0) var<uniform> batch: Batch;
-@group(0) @binding(1) var<storage, read> directions: array<Direction>;
+@group(0) @binding(1) var<storage, read> directions: array<GpuDirection>;
 @group(0) @binding(2) var<storage, read> positions: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> normals: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> list: array<u32>;
@@ -60,9 +35,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             word &= ~bit;
             if dot(n, d.light.xyz) > 0.0 {
                 let cosine = dot(n, d.light.xyz);
-                let tan_theta = min(sqrt(max(1.0 - cosine * cosine, 0.0)) / cosine, batch.max_tan);
-                let toward = batch.toward_light + batch.slope * tan_theta;
-                let moved = p + d.light.xyz * toward + n * batch.along_normal;
+                let tan_theta = min(sqrt(max(1.0 - cosine * cosine, 0.0)) / cosine, batch.offset.max_tan);
+                let toward = batch.offset.toward_light + batch.offset.slope * tan_theta;
+                let moved = p + d.light.xyz * toward + n * batch.offset.along_normal;
                 let c = d.clip_from_world * vec4<f32>(moved, 1.0);
                 // The rasterizer's pixel of a point at c (row 0 at the top).
                 let x = clamp(floor((c.x * 0.5 + 0.5) * size), 0.0, size - 1.0);

@@ -2,14 +2,7 @@
 // where some sample passed and the vertex faces the light, cleared
 // elsewhere.
 
-struct Convert {
-    // Listed vertices whose queries were drawn, in list order.
-    vertices: u32,
-    direction: u32,
-    words: u32,
-    _pad: u32,
-    light: vec4<f32>,
-}
+// Convert is declared from Rust (visibility/queries.rs).
 
 @group(0) @binding(0) var<uniform> convert: Convert;
 @group(0) @binding(1) var<storage, read> normals: array<vec4<f32>>;

@@ -1,23 +1,8 @@
 // Depth maps of the occluders seen from each light direction (§3.2), and
 // the points and triangles drawn against them with occlusion queries.
 
-struct Direction {
-    // Clip space of the direction's depth map.
-    clip_from_world: mat4x4<f32>,
-    // Toward the light (xyz); w is padding.
-    light: vec4<f32>,
-}
-
-struct Offset {
-    // World distances each tested vertex moves toward the light and along
-    // its normal.
-    toward_light: f32,
-    along_normal: f32,
-    // World distance per unit of tan θ (θ between the vertex normal and
-    // the light) the vertex moves toward the light, at most `max_tan` of it.
-    slope: f32,
-    max_tan: f32,
-}
+// GpuDirection and TestOffset are declared from Rust (views.rs,
+// visibility/mod.rs).
 
 // Where a tested vertex at `p` with normal `n` is compared, for light `l`.
 fn moved(p: vec3<f32>, n: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
@@ -26,8 +11,8 @@ fn moved(p: vec3<f32>, n: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     return p + l * (offset.toward_light + offset.slope * tan_theta) + n * offset.along_normal;
 }
 
-@group(0) @binding(0) var<storage, read> directions: array<Direction>;
-@group(0) @binding(1) var<uniform> offset: Offset;
+@group(0) @binding(0) var<storage, read> directions: array<GpuDirection>;
+@group(0) @binding(1) var<uniform> offset: TestOffset;
 
 struct Clip {
     @builtin(position) @invariant position: vec4<f32>,

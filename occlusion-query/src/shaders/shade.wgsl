@@ -4,31 +4,11 @@
 // quadrature of the cosine (then an unoccluded vertex under uniform light
 // gets exactly ρ).
 
-struct Shade {
-    vertices: u32,
-    // Directions in use: the first `directions` of the lightsphere.
-    directions: u32,
-    words: u32,
-    // 1: scale by π / Σ_j w_j max(0, n·l_j).
-    normalize: u32,
-    // The viewer, in the space of the positions.
-    eye: vec4<f32>,
-}
-
-struct Direction {
-    clip_from_world: mat4x4<f32>,
-    light: vec4<f32>,
-}
-
-struct Material {
-    // Diffuse albedo ρ_d (rgb).
-    diffuse: vec4<f32>,
-    // Specular albedo ρ_s (rgb) and the Phong exponent (w).
-    specular: vec4<f32>,
-}
+// Shade, GpuDirection and GpuMaterial are declared from Rust (shading.rs,
+// views.rs).
 
 @group(0) @binding(0) var<uniform> shade: Shade;
-@group(0) @binding(1) var<storage, read> directions: array<Direction>;
+@group(0) @binding(1) var<storage, read> directions: array<GpuDirection>;
 // Radiance arriving from each direction (rgb) and the solid angle the
 // direction stands for at the level shaded (w): a coarser level's cells are
 // larger than the finest level's.
@@ -36,7 +16,7 @@ struct Material {
 @group(0) @binding(3) var<storage, read> positions: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> normals: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read> bits: array<u32>;
-@group(0) @binding(6) var<storage, read> materials: array<Material>;
+@group(0) @binding(6) var<storage, read> materials: array<GpuMaterial>;
 // Per vertex: its object's material (low 31 bits), evaluated (top bit).
 @group(0) @binding(7) var<storage, read> vertex_info: array<u32>;
 @group(0) @binding(8) var<storage, read_write> radiance: array<vec4<f32>>;

@@ -1,6 +1,10 @@
 //! GPU device setup, error capture and read-back shared by the wgpu method
 //! crates (`occlusion-query`, `deferred-shadow`), so that both open devices,
-//! report adapters and surface GPU errors the same way (DESIGN.md, "Layout").
+//! report adapters and surface GPU errors the same way (DESIGN.md, "Layout"),
+//! and the plumbing both build on: layout entries and pipelines
+//! ([`binding`]), uploads and growing buffers ([`buffer`]), depth-only
+//! passes and occlusion queries ([`depth`]), per-dispatch uniform blocks
+//! ([`uniforms`]) and WGSL declarations generated from Rust ([`wgsl`]).
 //!
 //! # One device, many users
 //!
@@ -27,9 +31,13 @@
 //! caller using the device directly) is printed to standard error instead of
 //! wgpu's default panic, and a lost device is reported to every later capture.
 
+pub mod binding;
+pub mod buffer;
+pub mod depth;
 mod readback;
 mod stages;
 pub mod uniforms;
+pub mod wgsl;
 
 use std::fmt;
 use std::sync::{Arc, Mutex};

@@ -1,5 +1,3 @@
-//! Uniform blocks and bind group layout entries shared by the GPU methods.
-//!
 //! Uniform blocks written once per recorded dispatch or draw: slots 256
 //! bytes apart in one buffer, bound with a dynamic offset, so that several
 //! dispatches recorded into one encoder each read their own values (a
@@ -55,58 +53,12 @@ impl<T: Pod> Slots<T> {
     }
 
     /// The binding of one slot, for a bind group entry with a dynamic
-    /// offset.
+    /// offset ([`super::binding::dynamic_uniform`]).
     pub fn binding(&self) -> wgpu::BindingResource<'_> {
         wgpu::BindingResource::Buffer(wgpu::BufferBinding {
             buffer: &self.buffer,
             offset: 0,
             size: NonZeroU64::new(size_of::<T>() as u64),
         })
-    }
-}
-
-/// The layout entry of a uniform block bound with a dynamic offset.
-pub fn dynamic_uniform(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: true,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// The layout entry of a storage buffer.
-pub fn storage(
-    binding: u32,
-    read_only: bool,
-    visibility: wgpu::ShaderStages,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// The layout entry of a uniform block bound without an offset.
-pub fn uniform(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
     }
 }
