@@ -46,8 +46,10 @@
 
 mod accessor;
 mod animation;
+mod file;
 mod geometry;
 mod hierarchy;
+mod instance;
 mod meshopt;
 mod morph;
 pub mod patch;
@@ -55,24 +57,20 @@ mod skin;
 #[cfg(test)]
 mod tests;
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::{Affine3A, Mat3, Mat4, Vec3};
+use glam::{Mat3, Mat4};
 use serde::Serialize;
 use shadow_core::{Brdf, Error, Frame, Mesh, Object, Pose, Result};
 
 use accessor::Buffers;
 use animation::Clip;
-use geometry::Geometry;
+pub use file::SUPPORTED_EXTENSIONS;
+use file::{QUANTIZATION, default_weights, load_buffers, named, scene_nodes, validated};
 pub use geometry::VertexAttribute;
 use hierarchy::Hierarchy;
-use morph::Morph;
-use skin::{Skin, normal_matrix};
-
-/// The mirror that turns a mirrored node's mesh back into a rotation-only pose.
-const MIRROR: Vec3 = Vec3::new(-1.0, 1.0, 1.0);
+use instance::{Identity, Instance, rigid_or_morphed_instance, skinned_instance};
 
 /// What loading changed or left out, for logs and reports.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
@@ -129,34 +127,6 @@ pub struct ObjectSource {
     /// (primitive index in the mesh, vertex count), in the object's vertex
     /// order; point and line primitives are not among them.
     pub primitives: Vec<(usize, usize)>,
-}
-
-/// One node instancing a mesh.
-struct Instance {
-    node: usize,
-    source: ObjectSource,
-    attributes: BTreeMap<String, VertexAttribute>,
-    label: String,
-    mesh: Arc<Mesh>,
-    motion: Motion,
-}
-
-enum Motion {
-    /// `Pose::Rigid(world · diag(−1, 1, 1))` when `mirrored`, else `world`.
-    Rigid { mirrored: bool },
-    /// `world · (base + Σ w Δ)`, from the file's (unmirrored) base shape.
-    Morphed {
-        mirrored: bool,
-        morph: Morph,
-        positions: Vec<Vec3>,
-        normals: Option<Vec<Vec3>>,
-    },
-    /// Morph (if any), then skinning of the mesh's bind-pose geometry.
-    Skinned {
-        skin: Skin,
-        morph: Option<Morph>,
-        normals: Option<Vec<Vec3>>,
-    },
 }
 
 impl GltfAsset {
@@ -410,93 +380,8 @@ impl GltfAsset {
         let (world, weights) = self.world_at(time);
         self.instances
             .iter()
-            .map(|instance| self.pose(instance, &world, &weights, time))
+            .map(|instance| instance.pose(&self.path, &world, &weights, time))
             .collect()
-    }
-
-    fn pose(
-        &self,
-        instance: &Instance,
-        world: &[Mat4],
-        weights: &[Vec<f32>],
-        time: f32,
-    ) -> Result<Pose> {
-        let bad = |what: &str| {
-            Error::format(
-                &self.path,
-                format!("{} at t = {time} s: {what}", instance.label),
-            )
-        };
-        let node_world = world[instance.node];
-        let check_mirror = |mirrored: bool| {
-            let determinant = Mat3::from_mat4(node_world).determinant();
-            if determinant == 0.0 || (determinant < 0.0) != mirrored {
-                Err(bad(&format!(
-                    "the animation changes the sign of the world transform's determinant to {determinant}"
-                )))
-            } else {
-                Ok(())
-            }
-        };
-        let (positions, normals) = match &instance.motion {
-            Motion::Rigid { mirrored } => {
-                check_mirror(*mirrored)?;
-                let mirror = if *mirrored {
-                    Mat4::from_scale(MIRROR)
-                } else {
-                    Mat4::IDENTITY
-                };
-                let transform = Affine3A::from_mat4(node_world * mirror);
-                if !transform.is_finite() {
-                    return Err(bad("the world transform is not finite"));
-                }
-                return Ok(Pose::Rigid(transform));
-            }
-            Motion::Morphed {
-                mirrored,
-                morph,
-                positions,
-                normals,
-            } => {
-                check_mirror(*mirrored)?;
-                let (positions, normals) =
-                    morph.apply(&weights[instance.node], positions, normals.as_deref());
-                let normal_world = normal_matrix(Mat3::from_mat4(node_world));
-                (
-                    positions
-                        .iter()
-                        .map(|p| node_world.transform_point3(*p))
-                        .collect::<Vec<_>>(),
-                    normals.map(|n| {
-                        n.iter()
-                            .map(|n| (normal_world * *n).normalize_or_zero())
-                            .collect::<Vec<_>>()
-                    }),
-                )
-            }
-            Motion::Skinned {
-                skin,
-                morph,
-                normals,
-            } => match morph {
-                Some(morph) => {
-                    let (positions, normals) = morph.apply(
-                        &weights[instance.node],
-                        instance.mesh.positions(),
-                        normals.as_deref(),
-                    );
-                    skin.deform(world, &positions, normals.as_deref())
-                }
-                None => skin.deform(world, instance.mesh.positions(), normals.as_deref()),
-            },
-        };
-        if let Some(v) = positions.iter().position(|p| !p.is_finite()) {
-            return Err(bad(&format!("vertex {v} has a non-finite position")));
-        }
-        Ok(Pose::Deformed {
-            positions: positions.into(),
-            normals: normals.map(Into::into),
-        })
     }
 
     /// The objects (one material for all) and frames sampled from the
@@ -532,270 +417,4 @@ impl GltfAsset {
             .collect::<Result<_>>()?;
         Ok((self.objects(material), frames))
     }
-}
-
-/// `KHR_mesh_quantization`: attributes stored as integers (read by
-/// [`Buffers::floats`]).
-const QUANTIZATION: &str = "KHR_mesh_quantization";
-
-/// The extensions a file may require: they change how geometry is stored,
-/// and the loader reads them. Any other required extension (Draco
-/// compression among them) is refused by name.
-pub const SUPPORTED_EXTENSIONS: [&str; 2] = [QUANTIZATION, meshopt::EXTENSION];
-
-/// `document` checked by the `gltf` crate's validation (every index in
-/// range, required properties present), except for two things that crate
-/// refuses although glTF 2.0 allows them: accessors without a `bufferView`
-/// (zero-filled, §3.6.2.4, which [`Buffers`] reads) and the required
-/// extensions this loader supports.
-fn validated(document: ::gltf::Document) -> std::result::Result<::gltf::Document, String> {
-    use ::gltf::json::validation::{Error as Invalid, Validate};
-    let json = document.into_json();
-    let mut errors = Vec::new();
-    json.validate(&json, ::gltf::json::Path::new, &mut |path, error| {
-        let path = path();
-        let zero_filled = error == Invalid::Missing
-            && path.as_str().starts_with("accessors[")
-            && path.as_str().ends_with("].bufferView");
-        let supported = error == Invalid::Unsupported
-            && path.as_str().starts_with("extensionsRequired[")
-            && SUPPORTED_EXTENSIONS
-                .iter()
-                .any(|name| path.as_str().ends_with(&format!("{name:?}")));
-        if !(zero_filled || supported) {
-            errors.push(format!("{}: {error}", path.as_str()));
-        }
-    });
-    if errors.is_empty() {
-        Ok(::gltf::Document::from_json_without_validation(json))
-    } else {
-        Err(format!("invalid glTF: {}", errors.join(", ")))
-    }
-}
-
-/// The buffers' bytes: the GLB's BIN chunk, external files next to `path`, or
-/// `data:` URIs, each checked to be as long as the file declares. A fallback
-/// buffer of `EXT_meshopt_compression` without a source stays empty: only
-/// compressed views point into it, and they are decoded from elsewhere.
-fn load_buffers(
-    path: &Path,
-    document: &::gltf::Document,
-    mut blob: Option<Vec<u8>>,
-) -> Result<Vec<Vec<u8>>> {
-    let base = path.parent();
-    document
-        .buffers()
-        .map(|buffer| {
-            if meshopt::is_fallback(&buffer)
-                && matches!(buffer.source(), ::gltf::buffer::Source::Bin)
-            {
-                return Ok(Vec::new());
-            }
-            let source = match buffer.source() {
-                ::gltf::buffer::Source::Bin => "the GLB BIN chunk".to_string(),
-                ::gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
-                    "a data: URI".to_string()
-                }
-                ::gltf::buffer::Source::Uri(uri) => format!("{uri:?}"),
-            };
-            let bad = |what: String| {
-                Error::format(
-                    path,
-                    format!("buffer {} (from {source}): {what}", buffer.index()),
-                )
-            };
-            let data = ::gltf::buffer::Data::from_source_and_blob(buffer.source(), base, &mut blob)
-                .map_err(|e| bad(e.to_string()))?;
-            if data.len() < buffer.length() {
-                return Err(bad(format!(
-                    "has {} bytes, the file declares {}",
-                    data.len(),
-                    buffer.length()
-                )));
-            }
-            Ok(data.0)
-        })
-        .collect()
-}
-
-/// The nodes of the scene shown (the default scene, else the first, else all
-/// root nodes), parents before children, each once.
-fn scene_nodes<'a>(document: &'a ::gltf::Document) -> Vec<::gltf::Node<'a>> {
-    let roots: Vec<_> = match document
-        .default_scene()
-        .or_else(|| document.scenes().next())
-    {
-        Some(scene) => scene.nodes().collect(),
-        None => {
-            let mut has_parent = vec![false; document.nodes().len()];
-            for child in document.nodes().flat_map(|n| n.children()) {
-                has_parent[child.index()] = true;
-            }
-            document
-                .nodes()
-                .filter(|n| !has_parent[n.index()])
-                .collect()
-        }
-    };
-    let mut visited = vec![false; document.nodes().len()];
-    let mut stack: Vec<_> = roots.into_iter().rev().collect();
-    let mut nodes = Vec::new();
-    while let Some(node) = stack.pop() {
-        if std::mem::replace(&mut visited[node.index()], true) {
-            continue;
-        }
-        let children: Vec<_> = node.children().collect();
-        stack.extend(children.into_iter().rev());
-        nodes.push(node);
-    }
-    nodes
-}
-
-/// "node 3" or "node 3 \"Head\"": how errors name glTF elements.
-fn named(kind: &str, index: usize, name: Option<&str>) -> String {
-    match name {
-        Some(name) if !name.is_empty() => format!("{kind} {index} {name:?}"),
-        _ => format!("{kind} {index}"),
-    }
-}
-
-/// The weights a node's morph targets have without animation: the node's,
-/// else its mesh's, else zeros (glTF 2.0 §3.7.2.2).
-fn default_weights(path: &Path, node: &::gltf::Node, count: usize) -> Result<Vec<f32>> {
-    let given = node
-        .weights()
-        .or_else(|| node.mesh().and_then(|m| m.weights()));
-    match given {
-        None => Ok(vec![0.0; count]),
-        Some(w) if w.len() == count && w.iter().all(|x| x.is_finite()) => Ok(w.to_vec()),
-        Some(w) => Err(Error::format(
-            path,
-            format!(
-                "{}: {count} finite default morph weights expected, found {w:?}",
-                named("node", node.index(), node.name())
-            ),
-        )),
-    }
-}
-
-/// A mesh instance's node, the name its [`Mesh`] gets, how errors call it,
-/// and where its vertices and their other attributes are stored.
-struct Identity {
-    node: usize,
-    name: String,
-    label: String,
-    source: ObjectSource,
-    attributes: BTreeMap<String, VertexAttribute>,
-}
-
-/// A validated mesh, its errors naming the file and the node and mesh.
-fn build_mesh(
-    path: &Path,
-    id: &Identity,
-    positions: Vec<Vec3>,
-    normals: Option<Vec<Vec3>>,
-    triangles: Vec<[u32; 3]>,
-) -> Result<Arc<Mesh>> {
-    Mesh::new(id.name.clone(), positions, normals, triangles)
-        .map(Arc::new)
-        .map_err(|e| Error::format(path, format!("{}: {e}", id.label)))
-}
-
-fn skinned_instance(
-    path: &Path,
-    buffers: &Buffers,
-    id: Identity,
-    skin: &::gltf::Skin,
-    geometry: Geometry,
-    report: &mut GltfReport,
-) -> Result<Instance> {
-    let label = &id.label;
-    let raw = geometry
-        .influences
-        .as_ref()
-        .filter(|r| r.width > 0)
-        .ok_or_else(|| {
-            Error::format(
-                path,
-                format!("{label}: skinned, but has no JOINTS_0/WEIGHTS_0"),
-            )
-        })?;
-    let skin = Skin::new(path, label, skin, buffers, raw)?;
-    report.renormalized_weights += skin.renormalized;
-    let morph = (!geometry.targets.is_empty()).then_some(Morph {
-        targets: geometry.targets,
-    });
-    let mesh = build_mesh(
-        path,
-        &id,
-        geometry.positions,
-        geometry.normals.clone(),
-        geometry.triangles,
-    )?;
-    Ok(Instance {
-        node: id.node,
-        source: id.source,
-        attributes: id.attributes,
-        label: id.label,
-        mesh,
-        motion: Motion::Skinned {
-            skin,
-            morph,
-            normals: geometry.normals,
-        },
-    })
-}
-
-fn rigid_or_morphed_instance(
-    path: &Path,
-    id: Identity,
-    geometry: Geometry,
-    mirrored: bool,
-    animated_weights: bool,
-    weights: &[f32],
-) -> Result<Instance> {
-    let Geometry {
-        positions,
-        normals,
-        mut triangles,
-        targets,
-        ..
-    } = geometry;
-    let morph = Morph { targets };
-    // Without animated weights the shape never changes: bake the defaults.
-    let (mesh_positions, mesh_normals) = if animated_weights {
-        (positions.clone(), normals.clone())
-    } else {
-        morph.apply(weights, &positions, normals.as_deref())
-    };
-    let (mesh_positions, mesh_normals) = if mirrored {
-        for t in &mut triangles {
-            t.swap(1, 2);
-        }
-        (
-            mesh_positions.into_iter().map(|p| p * MIRROR).collect(),
-            mesh_normals.map(|n| n.into_iter().map(|n| n * MIRROR).collect()),
-        )
-    } else {
-        (mesh_positions, mesh_normals)
-    };
-    let mesh = build_mesh(path, &id, mesh_positions, mesh_normals, triangles)?;
-    let motion = if animated_weights {
-        Motion::Morphed {
-            mirrored,
-            morph,
-            positions,
-            normals,
-        }
-    } else {
-        Motion::Rigid { mirrored }
-    };
-    Ok(Instance {
-        node: id.node,
-        source: id.source,
-        attributes: id.attributes,
-        label: id.label,
-        mesh,
-        motion,
-    })
 }

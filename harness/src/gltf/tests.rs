@@ -4,10 +4,11 @@
 use std::f32::consts::FRAC_PI_2;
 
 use approx::assert_relative_eq;
-use glam::Quat;
+use glam::{Affine3A, Quat, Vec3};
 use serde_json::{Value, json};
 use shadow_core::{Aabb, Camera, Scene};
 
+use super::instance::Motion;
 use super::*;
 
 fn asset(name: &str) -> GltfAsset {

@@ -1,8 +1,10 @@
+use shadow_core::{Capabilities, Profile};
+
 use super::*;
 use crate::reference::ImageReferenceInfo;
-use crate::run::StageTimes;
-use crate::score::Temporal;
-use shadow_core::{Capabilities, Profile};
+use crate::run::{FrameResult, StageTimes};
+use crate::score::{ErrorStats, Temporal};
+use crate::suite::RAY_TRACER;
 
 fn stats(error: f32) -> ErrorStats {
     ErrorStats {

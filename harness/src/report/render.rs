@@ -1,0 +1,457 @@
+//! The report's files: charts, tables, the Markdown and HTML document.
+
+use std::path::Path;
+
+use shadow_core::Result;
+
+use super::analyse::Domain;
+use super::{Block, Document, Figure, Report, ReportRun, Table, atlas};
+use crate::{
+    chart::{self, Axes, Point},
+    io::{write_atomic, write_json_atomic},
+    run::FrameResult,
+    score::ErrorStats,
+    suite::Suite,
+};
+
+/// The overall charts: every run of every scene.
+const OVERVIEW: [&str; 2] = ["speed-vs-error.png", "speed-vs-error-image.png"];
+
+impl Report {
+    /// Writes every file of the report into `dir` (see the module docs).
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        for scene in self.scenes() {
+            let noise = self.references.iter().find(|r| r.scene == scene);
+            for domain in [Domain::Vertex, Domain::Image] {
+                let curves = self.curves(scene, domain);
+                if curves.is_empty() {
+                    continue;
+                }
+                let noise = noise.and_then(|r| match domain {
+                    Domain::Vertex => Some(f64::from(r.noise) * 100.0),
+                    Domain::Image => r.image.as_ref().map(|i| f64::from(i.noise) * 100.0),
+                });
+                let stem = dir.join("charts").join(format!("{scene}-{}", domain.key()));
+                let axes = Axes {
+                    title: &format!("{scene}: {}", domain.axes().title),
+                    ..domain.axes()
+                };
+                chart::pareto(
+                    &curves,
+                    noise,
+                    axes,
+                    &stem.with_extension("png"),
+                    &stem.with_extension("svg"),
+                )?;
+            }
+        }
+        for (domain, file) in [Domain::Vertex, Domain::Image].into_iter().zip(OVERVIEW) {
+            let points: Vec<Point> = (self.runs.iter())
+                .filter_map(|r| {
+                    let (error_percent, frame_ms) = domain.point(&r.result)?;
+                    Some(Point {
+                        series: r.family.clone(),
+                        label: format!("{} {}", r.result.scene, setting_label(&r.setting)),
+                        error_percent,
+                        frame_ms,
+                    })
+                })
+                .collect();
+            if !points.is_empty() {
+                let png = dir.join("charts").join(file);
+                chart::speed_vs_error(&points, domain.axes(), &png, &png.with_extension("svg"))?;
+            }
+        }
+        write_json_atomic(&dir.join("report.json"), self)?;
+        write_atomic(&dir.join("report.csv"), self.runs_table().csv().as_bytes())?;
+        let document = self.document(dir);
+        write_atomic(&dir.join("report.md"), document.markdown().as_bytes())?;
+        write_atomic(&dir.join("index.html"), document.html(dir).as_bytes())
+    }
+
+    /// One row per run: the CSV, and per scene the report's tables.
+    pub fn runs_table(&self) -> Table {
+        self.table_of(self.runs.iter(), true)
+    }
+
+    pub(super) fn table_of<'a>(
+        &self,
+        runs: impl Iterator<Item = &'a ReportRun>,
+        with_scene: bool,
+    ) -> Table {
+        let mut columns = vec![
+            "scene",
+            "family",
+            "setting",
+            "vertex error#",
+            "p99#",
+            "max#",
+            "ms per frame#",
+            "image error#",
+            "image p99#",
+            "ms per image#",
+            "flicker#",
+            "relight ms#",
+            "prepare ms#",
+            "frontier",
+        ];
+        if !with_scene {
+            columns.remove(0);
+        }
+        let mut table = Table::new(&columns);
+        for run in runs {
+            let r = &run.result;
+            let worst = |f: fn(&ErrorStats) -> f32,
+                         domain: fn(&FrameResult) -> Option<ErrorStats>| {
+                let values: Option<Vec<f32>> = r
+                    .frames
+                    .iter()
+                    .map(|fr| domain(fr).map(|e| f(&e)))
+                    .collect();
+                values.map(|v| v.into_iter().fold(0.0, f32::max))
+            };
+            let vertex = |fr: &FrameResult| Some(fr.vertex);
+            let image = |fr: &FrameResult| fr.image;
+            let percent = |v: Option<f32>, digits: usize| {
+                v.map_or("–".to_string(), |v| format!("{:.*}%", digits, v * 100.0))
+            };
+            let ms = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{:.2}", v * 1e3));
+            let evaluated = r.evaluated_fraction();
+            let vertex_error = if evaluated < 1.0 {
+                format!(
+                    "{:.2}% ({:.0}% of vertices)",
+                    r.mean_error() * 100.0,
+                    evaluated * 100.0
+                )
+            } else {
+                format!("{:.2}%", r.mean_error() * 100.0)
+            };
+            let flicker = r.worst_temporal().map_or("–".to_string(), |t| {
+                format!(
+                    "{:.2}% (reference {:.2}%, noise {:.2}%)",
+                    t.error_change * 100.0,
+                    t.reference_change * 100.0,
+                    t.noise_floor * 100.0
+                )
+            });
+            let on_frontier = |domain: Domain| {
+                let curves = self.curves(&r.scene, domain);
+                curves
+                    .iter()
+                    .find(|c| c.family == run.family)
+                    .and_then(|c| {
+                        let i = c
+                            .points
+                            .iter()
+                            .position(|p| p.0 == setting_label(&run.setting))?;
+                        c.frontier()[i].then_some(domain.key())
+                    })
+            };
+            let frontier: Vec<&str> = [Domain::Vertex, Domain::Image]
+                .into_iter()
+                .filter_map(on_frontier)
+                .collect();
+            let first = r.frames.first().map(|f| f.times);
+            let mut row = vec![
+                r.scene.clone(),
+                run.family.clone(),
+                run.setting.clone(),
+                vertex_error,
+                percent(worst(|e| e.p99, vertex), 1),
+                percent(worst(|e| e.max, vertex), 1),
+                ms(Some(r.frame_seconds())),
+                percent(r.mean_image_error(), 2),
+                percent(worst(|e| e.p99, image), 1),
+                ms(r.image_frame_seconds()),
+                flicker,
+                ms(first.map(|t| t.relight)),
+                ms(first.map(|t| t.prepare)),
+                frontier.join(", "),
+            ];
+            if !with_scene {
+                row.remove(0);
+            }
+            table.row(row);
+        }
+        table
+    }
+
+    /// The report as a document.
+    pub fn document(&self, dir: &Path) -> Document {
+        let m = &self.machine;
+        let mut doc = Document {
+            title: "Soft-shadow methods compared".into(),
+            blocks: Vec::new(),
+        };
+        let adapter = match &m.adapter {
+            Some(a) if m.software_adapter() => {
+                format!("{a}; its GPU timings are software-rasterized, on the same CPU cores")
+            }
+            Some(a) => a.clone(),
+            None => "none used (CPU methods only)".into(),
+        };
+        doc.push(Block::Paragraph(format!(
+            "Machine: {}, {} threads, {} build. GPU adapter: {adapter}. Suite: {:?}.",
+            m.cpu, m.threads, m.profile, self.settings.suite
+        )));
+        doc.push(Block::Paragraph(
+            "Errors are relative L2 errors against the Monte-Carlo reference, averaged over frames: \
+             per vertex over the vertices a method evaluated, per pixel over the pixels the reference \
+             covers (a pixel the method leaves uncovered counts as zero). p99 and max are per-element \
+             relative errors (floor 1% of the RMS radiance), the worst over frames. Time per frame is \
+             update + shade per vertex, update + render per image; relighting is timed apart; update \
+             on its first call for each frame, the other stages medians of repeated runs. Flicker is \
+             the worst frame-to-frame change of the per-vertex error, sqrt(Σ|e_t − e_t−1|² / Σ|r_t|²), \
+             beside how much the reference itself changes and the part the references' noise explains. \
+             Each chart draws a family's settings as one curve, filled points on its frontier (no other \
+             setting of the family is both faster and more accurate), the ray tracer dashed as the line \
+             to beat, and the reference's noise as a grey band."
+                .into(),
+        ));
+        if let Some(summary) = self.summary() {
+            doc.push(Block::Heading(2, "Summary".into()));
+            doc.push(Block::Paragraph(
+                "Per scene and family, the most accurate setting per vertex (error, time per frame) \
+                 and per pixel."
+                    .into(),
+            ));
+            doc.push(Block::Table(summary));
+            let overview: Vec<Figure> = OVERVIEW
+                .iter()
+                .filter(|f| dir.join("charts").join(f).exists())
+                .map(|f| Figure {
+                    path: format!("charts/{f}"),
+                    caption: "every run of every scene".into(),
+                })
+                .collect();
+            doc.push(Block::Figures(overview));
+        }
+        doc.push(Block::Heading(2, "References".into()));
+        doc.push(Block::Table(self.references_table()));
+        for scene in self.scenes() {
+            doc.push(Block::Heading(2, format!("Scene: {scene}")));
+            if let Some(spec) = crate::scenes::SCENES.iter().find(|s| s.name == scene) {
+                doc.push(Block::Paragraph(format!(
+                    "{} (under `{}`).",
+                    spec.shows, spec.environment
+                )));
+            }
+            let figures: Vec<Figure> = [Domain::Vertex, Domain::Image]
+                .into_iter()
+                .map(|d| format!("charts/{scene}-{}.png", d.key()))
+                .filter(|p| dir.join(p).exists())
+                .map(|path| Figure {
+                    caption: format!("{scene}: time against error"),
+                    path,
+                })
+                .collect();
+            doc.push(Block::Figures(figures));
+            doc.push(Block::Table(self.table_of(self.runs_of(scene), false)));
+        }
+        let profiled: Vec<String> = (self.runs.iter())
+            .filter_map(|run| {
+                let r = &run.result;
+                let frame = r.frames.get(r.frames.len() / 2)?;
+                (!frame.profile.is_empty()).then(|| {
+                    format!(
+                        "{} on {} (frame {}): {}",
+                        run.setting,
+                        r.scene,
+                        frame.frame,
+                        frame.profile.to_string().replace('\n', "; ")
+                    )
+                })
+            })
+            .collect();
+        if !profiled.is_empty() {
+            doc.push(Block::Heading(2, "Where the time goes".into()));
+            doc.push(Block::Paragraph(
+                "Each method's own breakdown of its stages, on the middle frame (medians over repeats)."
+                    .into(),
+            ));
+            doc.push(Block::Bullets(profiled));
+        }
+        if let Some(scene) = &self.strip {
+            self.strip_blocks(&mut doc, scene);
+        }
+        atlas::blocks(&mut doc, &self.atlas_scenes, &self.atlas);
+        for (heading, list) in [
+            ("Failed", &self.failed),
+            ("Not run (not supported)", &self.skipped),
+        ] {
+            if !list.is_empty() {
+                doc.push(Block::Heading(2, heading.into()));
+                doc.push(Block::Bullets(
+                    list.iter()
+                        .map(|s| format!("{} on {}: {}", s.method, s.scene, s.why))
+                        .collect(),
+                ));
+            }
+        }
+        doc.push(Block::Heading(2, "Reproducibility".into()));
+        let s = &self.settings;
+        let suite = format!("{:?}", s.suite).to_lowercase();
+        doc.push(Block::Bullets(vec![
+            format!("revision: {}", m.revision.as_deref().unwrap_or("unknown (not a git checkout)")),
+            format!("CPU: {} with {}; {} threads; {} build", m.cpu, m.cpu_features.join(", "), m.threads, m.profile),
+            format!("GPU adapter: {adapter}"),
+            format!(
+                "references: seed {:#x}, target relative noise {} per vertex and {} per pixel, images {} pixels wide",
+                s.seed, s.target_noise, s.image_target_noise, s.image_width
+            ),
+            format!("repeats per stage: {}", s.repeats),
+            format!(
+                "command: `cargo run --release -p harness -- report --suite {suite} --target {} --image-target {} --image {} --seed {} --repeats {}`",
+                s.target_noise, s.image_target_noise, s.image_width, s.seed, s.repeats
+            ),
+            format!(
+                "settings run: {}",
+                self.families
+                    .iter()
+                    .map(|f| {
+                        let names: Vec<&str> = f.methods.iter().map(|m| m.name()).collect();
+                        format!("{} ({}): {}", f.family, f.parameter, names.join(", "))
+                    })
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ),
+        ]));
+        doc
+    }
+
+    /// Scenes × families: each family's most accurate setting.
+    pub(super) fn summary(&self) -> Option<Table> {
+        if self.runs.is_empty() {
+            return None;
+        }
+        let mut columns = vec!["scene".to_string()];
+        columns.extend(self.families.iter().map(|f| f.family.to_string()));
+        let mut table = Table {
+            numeric: vec![false; columns.len()],
+            header: columns,
+            rows: Vec::new(),
+        };
+        for scene in self.scenes() {
+            let mut row = vec![scene.to_string()];
+            for family in &self.families {
+                let best = |domain: Domain| {
+                    self.runs_of(scene)
+                        .filter(|r| r.family == family.family)
+                        .filter_map(|r| Some((domain.point(&r.result)?, &r.setting)))
+                        .min_by(|a, b| a.0.0.total_cmp(&b.0.0))
+                };
+                let cell = match (best(Domain::Vertex), best(Domain::Image)) {
+                    (None, _) => "–".to_string(),
+                    (Some(((e, t), setting)), image) => {
+                        let image = image.map_or(String::new(), |((e, t), _)| {
+                            format!("; {e:.2}% per pixel at {t:.1} ms")
+                        });
+                        format!("{e:.2}% at {t:.1} ms ({}){image}", setting_label(setting))
+                    }
+                };
+                row.push(cell);
+            }
+            table.rows.push(row);
+        }
+        Some(table)
+    }
+
+    fn references_table(&self) -> Table {
+        let mut t = Table::new(&[
+            "scene",
+            "environment",
+            "frames#",
+            "vertices#",
+            "noise#",
+            "rays#",
+            "seconds#",
+            "image",
+            "image noise#",
+            "image seconds#",
+        ]);
+        let secs = |cached: bool, seconds: f64| {
+            if cached {
+                "cached".to_string()
+            } else {
+                format!("{seconds:.1}")
+            }
+        };
+        for r in &self.references {
+            let (size, noise, seconds) = match &r.image {
+                Some(i) => (
+                    format!("{}×{}", i.width, i.height),
+                    format!("{:.3}%", i.noise * 100.0),
+                    secs(i.cached, i.seconds),
+                ),
+                None => ("–".into(), "–".into(), "–".into()),
+            };
+            t.row(vec![
+                r.scene.clone(),
+                r.environment.clone(),
+                r.frames.to_string(),
+                r.vertices.to_string(),
+                format!("{:.3}%", r.noise * 100.0),
+                r.rays.to_string(),
+                secs(r.cached, r.seconds),
+                size,
+                noise,
+                seconds,
+            ]);
+        }
+        t
+    }
+
+    /// The strip: the reference, then each strip setting's image and its
+    /// error map, with its error per pixel.
+    fn strip_blocks(&self, doc: &mut Document, scene: &str) {
+        let runs: Vec<&ReportRun> = Suite::strip_settings()
+            .iter()
+            .filter_map(|m| {
+                self.runs_of(scene)
+                    .find(|r| r.setting == m.name() && r.result.last_image.is_some())
+            })
+            .collect();
+        doc.push(Block::Heading(
+            2,
+            format!("Per pixel against per vertex: {scene}"),
+        ));
+        doc.push(Block::Paragraph(
+            "The contact shadow on a floor of two triangles: per-vertex methods interpolate \
+             between the floor's four corners, deferred shadowing draws it per pixel. First row: \
+             the images (the reference's exposure); second: relative error per pixel (0.1% to \
+             100%, logarithmic, colour scale beneath each map)."
+                .into(),
+        ));
+        let mut images = vec![Figure {
+            path: format!("strip/{scene}/reference.png"),
+            caption: "reference".into(),
+        }];
+        let mut errors = Vec::new();
+        for r in &runs {
+            let label = crate::images::file_stem(&r.result.method);
+            images.push(Figure {
+                path: format!("strip/{scene}/{label}.png"),
+                caption: format!(
+                    "{} ({:.1}%)",
+                    r.setting,
+                    100.0 * r.result.mean_image_error().unwrap_or(f32::NAN)
+                ),
+            });
+            errors.push(Figure {
+                path: format!("strip/{scene}/{label}-error.png"),
+                caption: format!("{} error", r.setting),
+            });
+        }
+        doc.push(Block::Figures(images));
+        doc.push(Block::Figures(errors));
+    }
+}
+
+/// A setting's short label on a chart: the options after the family name
+/// (`k=66`), or `default`.
+pub(super) fn setting_label(setting: &str) -> String {
+    setting
+        .split_once(':')
+        .map_or("default", |(_, options)| options)
+        .to_string()
+}
