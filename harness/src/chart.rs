@@ -6,11 +6,10 @@
 
 use std::path::Path;
 
-use image::{ImageEncoder, codecs::png::PngEncoder};
 use plotters::prelude::*;
 use shadow_core::{Error, Result};
 
-use crate::io::write_atomic;
+use crate::io::{write_atomic, write_png_atomic};
 
 /// DejaVu Sans (free licence, see assets/fonts), embedded so that charts need
 /// no system font libraries.
@@ -72,7 +71,7 @@ pub fn speed_vs_error(points: &[Point], axes: Axes, png: &Path, svg: &Path) -> R
     let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
     let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
     draw(root, points, axes).map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
-    write_png(png, &rgb)?;
+    write_png_atomic(png, &rgb, WIDTH, HEIGHT)?;
     let mut text = String::new();
     let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
     draw(root, points, axes).map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
@@ -181,7 +180,7 @@ pub fn pareto(
     let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
     draw_pareto(root, curves, noise_percent, axes)
         .map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
-    write_png(png, &rgb)?;
+    write_png_atomic(png, &rgb, WIDTH, HEIGHT)?;
     let mut text = String::new();
     let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
     draw_pareto(root, curves, noise_percent, axes)
@@ -268,15 +267,6 @@ where
     draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
-}
-
-/// A chart's pixels (`WIDTH` × `HEIGHT` RGB) as a PNG at `path`, atomically.
-fn write_png(path: &Path, rgb: &[u8]) -> Result<()> {
-    let mut png = Vec::new();
-    PngEncoder::new(&mut png)
-        .write_image(rgb, WIDTH, HEIGHT, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::format(path, format!("encoding the chart: {e}")))?;
-    write_atomic(path, &png)
 }
 
 /// The legend of a log-log chart, in its upper right corner.

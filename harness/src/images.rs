@@ -11,11 +11,15 @@ use exr::prelude::{
     SpecificChannels, Vec2 as ExrVec2, WritableImage,
 };
 use glam::Vec3;
-use image::{ImageEncoder, codecs::png::PngEncoder};
 use plotters::prelude::*;
 use shadow_core::{Error, Image, Result};
 
-use crate::{chart, io::write_atomic, run::RunResult, score::FLOOR};
+use crate::{
+    chart,
+    io::{write_atomic, write_png_atomic},
+    run::RunResult,
+    score::FLOOR,
+};
 
 /// Writes `image` to `path` as OpenEXR: RGBA f32 in ZIP-compressed scan
 /// lines, row 0 at the top, alpha 1 on covered pixels and 0 elsewhere.
@@ -134,7 +138,7 @@ pub fn write_png(path: &Path, image: &Image, exposure: Exposure) -> Result<()> {
             }
         })
         .collect();
-    encode_png(path, &rgb, image.width, image.height)
+    write_png_atomic(path, &rgb, image.width, image.height)
 }
 
 /// The sRGB encoding of a linear value in [0, 1] (clipped).
@@ -146,14 +150,6 @@ fn srgb(linear: f32) -> u8 {
         1.055 * v.powf(1.0 / 2.4) - 0.055
     };
     (encoded * 255.0 + 0.5) as u8
-}
-
-fn encode_png(path: &Path, rgb: &[u8], width: u32, height: u32) -> Result<()> {
-    let mut png = Vec::new();
-    PngEncoder::new(&mut png)
-        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::format(path, format!("encoding the PNG: {e}")))?;
-    write_atomic(path, &png)
 }
 
 /// The heat map's range of per-pixel relative error, on a log scale.
@@ -212,7 +208,7 @@ pub fn write_error_map(path: &Path, image: &Image, reference: &Image) -> Result<
         (width, height),
     )
     .map_err(|e| Error::format(path, format!("drawing the heat map: {e}")))?;
-    encode_png(path, &rgb, width, height)
+    write_png_atomic(path, &rgb, width, height)
 }
 
 /// Where `error` falls on the log scale, in [0, 1].

@@ -27,6 +27,17 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// Writes 8-bit RGB pixels, `width` × `height` row by row, as a PNG at
+/// `path`, atomically.
+pub fn write_png_atomic(path: &Path, rgb: &[u8], width: u32, height: u32) -> Result<()> {
+    use image::{ExtendedColorType, ImageEncoder, codecs::png::PngEncoder};
+    let mut png = Vec::new();
+    PngEncoder::new(&mut png)
+        .write_image(rgb, width, height, ExtendedColorType::Rgb8)
+        .map_err(|e| Error::format(path, format!("encoding the PNG: {e}")))?;
+    write_atomic(path, &png)
+}
+
 /// Writes `value` as pretty-printed JSON to `path`, atomically.
 pub fn write_json_atomic(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     let json = serde_json::to_vec_pretty(value).map_err(|e| Error::format(path, e.to_string()))?;

@@ -19,7 +19,11 @@
 //! Output files are written atomically; for a `.gltf` the `.bin` first, so
 //! that an interruption never leaves a `.gltf` pointing at missing data.
 
-use std::path::{Component, Path, PathBuf};
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+
+use ::gltf::binary::{Glb, Header};
+use percent_encoding::{AsciiSet, NON_ALPHANUMERIC, utf8_percent_encode};
 
 use serde_json::{Value, json};
 use shadow_core::{Error, Result};
@@ -27,10 +31,6 @@ use shadow_core::{Error, Result};
 use super::{ObjectSource, VertexAttribute};
 use crate::io::write_atomic;
 
-/// GLB's magic, version and chunk types (glTF 2.0 §4.4).
-const GLB_MAGIC: &[u8; 4] = b"glTF";
-const CHUNK_JSON: u32 = 0x4E4F_534A;
-const CHUNK_BIN: u32 = 0x004E_4942;
 /// `componentType` FLOAT and `target` ARRAY_BUFFER.
 const FLOAT: u32 = 5126;
 const ARRAY_BUFFER: u32 = 34962;
@@ -171,35 +171,16 @@ pub fn write_with_attribute(
     Ok(summary)
 }
 
-/// A GLB's JSON and BIN chunk, or a `.gltf`'s JSON.
+/// A GLB's JSON and BIN chunk (read by the `gltf` crate), or a `.gltf`'s
+/// JSON.
 fn parse(bytes: &[u8]) -> std::result::Result<(Value, Option<Vec<u8>>), String> {
-    if !bytes.starts_with(GLB_MAGIC) {
-        let json = serde_json::from_slice(bytes).map_err(|e| format!("malformed JSON: {e}"))?;
-        return Ok((json, None));
-    }
-    let word = |at: usize| -> std::result::Result<u32, String> {
-        bytes
-            .get(at..at + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .ok_or_else(|| format!("GLB truncated at byte {at}"))
+    let (json, bin) = if bytes.starts_with(b"glTF") {
+        let glb = Glb::from_slice(bytes).map_err(|e| format!("malformed GLB: {e}"))?;
+        (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
+    } else {
+        (bytes.to_vec(), None)
     };
-    let mut at = 12;
-    let (mut json, mut bin) = (None, None);
-    let end = (word(8)? as usize).min(bytes.len());
-    while at + 8 <= end {
-        let (length, kind) = (word(at)? as usize, word(at + 4)?);
-        let chunk = bytes
-            .get(at + 8..at + 8 + length)
-            .ok_or_else(|| format!("GLB chunk at byte {at} runs past the file"))?;
-        match kind {
-            CHUNK_JSON if json.is_none() => json = Some(chunk),
-            CHUNK_BIN if bin.is_none() => bin = Some(chunk.to_vec()),
-            _ => {}
-        }
-        at += 8 + length;
-    }
-    let json = json.ok_or("GLB without a JSON chunk")?;
-    let json = serde_json::from_slice(json).map_err(|e| format!("malformed JSON chunk: {e}"))?;
+    let json = serde_json::from_slice(&json).map_err(|e| format!("malformed JSON: {e}"))?;
     Ok((json, bin))
 }
 
@@ -398,26 +379,20 @@ impl<'a> Patched<'a> {
     }
 }
 
-/// A GLB container of `json` (padded with spaces) and `bin` (with zeros).
+/// A GLB container of `json` (padded with spaces) and `bin` (with zeros;
+/// no BIN chunk when empty), written by the `gltf` crate.
 fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
-    let pad = |n: usize| n.div_ceil(4) * 4;
-    let (json_len, bin_len) = (pad(json.len()), pad(bin.len()));
-    let total = 12 + 8 + json_len + if bin.is_empty() { 0 } else { 8 + bin_len };
-    let mut out = Vec::with_capacity(total);
-    out.extend(GLB_MAGIC);
-    out.extend(2u32.to_le_bytes());
-    out.extend((total as u32).to_le_bytes());
-    out.extend((json_len as u32).to_le_bytes());
-    out.extend(CHUNK_JSON.to_le_bytes());
-    out.extend(json);
-    out.resize(20 + json_len, b' ');
-    if !bin.is_empty() {
-        out.extend((bin_len as u32).to_le_bytes());
-        out.extend(CHUNK_BIN.to_le_bytes());
-        out.extend(bin);
-        out.resize(total, 0);
-    }
-    out
+    let glb = Glb {
+        header: Header {
+            magic: *b"glTF",
+            version: 2,
+            // Not read: `to_vec` writes the length of the chunks it writes.
+            length: 0,
+        },
+        json: Cow::Borrowed(json),
+        bin: (!bin.is_empty()).then_some(Cow::Borrowed(bin)),
+    };
+    glb.to_vec().expect("writing to memory cannot fail")
 }
 
 /// The absolute folder a file is in (the folder must exist).
@@ -439,57 +414,29 @@ fn relocated(uri: &str, from: &Path, to: &Path) -> Option<String> {
         return None;
     }
     let target = from.join(decode_uri(uri));
-    Some(encode_uri(&relative(to, &target).to_string_lossy()))
-}
-
-/// The path from folder `from` to `to`, both absolute.
-fn relative(from: &Path, to: &Path) -> PathBuf {
-    let (a, b): (Vec<Component>, Vec<Component>) =
-        (from.components().collect(), to.components().collect());
-    let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
-    let mut path = PathBuf::new();
-    for _ in common..a.len() {
-        path.push("..");
-    }
-    for c in &b[common..] {
-        path.push(c);
-    }
-    path
+    let path = pathdiff::diff_paths(&target, to)?;
+    Some(encode_uri(&path.to_string_lossy()))
 }
 
 /// Percent-decodes a URI reference (RFC 3986 §2.1).
 fn decode_uri(uri: &str) -> String {
-    let bytes = uri.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        let hex = |j: usize| bytes.get(j).and_then(|&c| (c as char).to_digit(16));
-        match (bytes[i], hex(i + 1), hex(i + 2)) {
-            (b'%', Some(h), Some(l)) => {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-            }
-            (c, _, _) => {
-                out.push(c);
-                i += 1;
-            }
-        }
-    }
-    String::from_utf8_lossy(&out).into_owned()
+    percent_encoding::percent_decode_str(uri)
+        .decode_utf8_lossy()
+        .into_owned()
 }
 
-/// Percent-encodes a relative path as a URI reference: everything but
-/// unreserved characters and `/`.
+/// What a relative path's URI reference percent-encodes: everything but
+/// unreserved characters (RFC 3986 §2.3) and `/`.
+const PATH: &AsciiSet = &NON_ALPHANUMERIC
+    .remove(b'-')
+    .remove(b'.')
+    .remove(b'_')
+    .remove(b'~')
+    .remove(b'/');
+
+/// Percent-encodes a relative path as a URI reference.
 fn encode_uri(path: &str) -> String {
-    let mut out = String::with_capacity(path.len());
-    for &b in path.as_bytes() {
-        if b.is_ascii_alphanumeric() || b"-._~/".contains(&b) {
-            out.push(b as char);
-        } else {
-            out.push_str(&format!("%{b:02X}"));
-        }
-    }
-    out
+    utf8_percent_encode(path, PATH).to_string()
 }
 
 #[cfg(test)]
