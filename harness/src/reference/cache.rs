@@ -6,13 +6,13 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use shadow_core::{Camera, Environment, FrameGeometry, Image, Result, Scene, VertexRadiance};
+use shadow_core::{Brdf, Camera, Environment, FrameGeometry, Image, Result, Scene, VertexRadiance};
 
 use super::{ImageReference, ReferenceSettings, VertexReference, split};
 use crate::io::write_atomic;
 
 /// Bumped whenever the estimator or the file layout changes meaning.
-const FORMAT: &[u8; 8] = b"SSREF005";
+const FORMAT: &[u8; 8] = b"SSREF006";
 
 /// What a reference is of: the vertices seen from an eye, or the pixels of
 /// a camera's image.
@@ -24,7 +24,9 @@ pub enum Domain<'a> {
 
 /// The content hash of a reference's inputs: geometry (positions, normals,
 /// triangles of every object), materials, the environment's texels, the view
-/// (eye, or the whole camera for images) and the estimator settings.
+/// (eye, or the whole camera for images) and the estimator settings, each
+/// value hashed as its little-endian bytes (never as it prints). Structs are
+/// destructured whole, so that a field added to one must be added here.
 pub fn cache_key(
     scene: &Scene,
     frame: &FrameGeometry,
@@ -38,15 +40,61 @@ pub fn cache_key(
         h.update(bytemuck::cast_slice(posed.positions()));
         h.update(bytemuck::cast_slice(posed.normals()));
         h.update(bytemuck::cast_slice(posed.triangles()));
-        h.update(format!("{:?}", object.material).as_bytes());
+        match object.material {
+            Brdf::Lambert { albedo } => {
+                h.update(b"lambert");
+                h.update(bytemuck::bytes_of(&albedo));
+            }
+            Brdf::Phong {
+                diffuse,
+                specular,
+                exponent,
+            } => {
+                h.update(b"phong");
+                h.update(bytemuck::bytes_of(&diffuse));
+                h.update(bytemuck::bytes_of(&specular));
+                h.update(&exponent.to_le_bytes());
+            }
+        }
     }
     h.update(&(environment.width() as u64).to_le_bytes());
     h.update(bytemuck::cast_slice(environment.texels()));
     match domain {
-        Domain::Vertices { eye } => h.update(bytemuck::bytes_of(&eye)),
-        Domain::Pixels { camera } => h.update(format!("pixels {camera:?}").as_bytes()),
+        Domain::Vertices { eye } => {
+            h.update(b"vertices");
+            h.update(bytemuck::bytes_of(&eye));
+        }
+        Domain::Pixels { camera } => {
+            let Camera {
+                eye,
+                target,
+                up,
+                fov_y,
+                width,
+                height,
+            } = *camera;
+            h.update(b"pixels");
+            h.update(bytemuck::cast_slice(&[eye, target, up]));
+            h.update(&fov_y.to_le_bytes());
+            h.update(&width.to_le_bytes());
+            h.update(&height.to_le_bytes());
+        }
     };
-    h.update(format!("{settings:?}").as_bytes());
+    let ReferenceSettings {
+        seed,
+        replicate_size,
+        min_replicates,
+        max_replicates,
+        target_noise,
+    } = *settings;
+    h.update(&seed.to_le_bytes());
+    h.update(&replicate_size.to_le_bytes());
+    h.update(&min_replicates.to_le_bytes());
+    h.update(&max_replicates.to_le_bytes());
+    match target_noise {
+        Some(noise) => h.update(&[1]).update(&noise.to_le_bytes()),
+        None => h.update(&[0]),
+    };
     h.finalize()
 }
 
@@ -287,5 +335,105 @@ impl Record {
             replicates,
             covered,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use shadow_core::{Object, shapes};
+
+    use super::*;
+
+    fn scene(material: Brdf) -> Scene {
+        let floor = Arc::new(shapes::floor("floor", Vec3::ZERO, 1.0, 1).unwrap());
+        let camera = Camera::framing(Vec3::ZERO, 2.0, Vec3::ONE, 8, 8).unwrap();
+        let object = Object {
+            mesh: floor,
+            material,
+        };
+        Scene::still("floor", vec![object], camera).unwrap()
+    }
+
+    /// The key is a function of the values: equal inputs give equal keys,
+    /// and changing any one field of the material, the view or the
+    /// settings changes it.
+    #[test]
+    fn the_key_follows_every_input() {
+        let grey = Brdf::lambert(Vec3::splat(0.5)).unwrap();
+        let env = Environment::uniform(Vec3::ONE);
+        let camera = Camera::framing(Vec3::ZERO, 2.0, Vec3::ONE, 8, 8).unwrap();
+        let settings = ReferenceSettings::CONVERGED;
+        let key = |material: Brdf, domain: Domain, settings: &ReferenceSettings| {
+            let scene = scene(material);
+            let frame = scene.frame_geometry(0).unwrap();
+            cache_key(&scene, &frame, &env, domain, settings)
+        };
+        let eye = Domain::Vertices { eye: Vec3::ONE };
+        let base = key(grey, eye, &settings);
+        assert_eq!(base, key(grey, eye, &settings));
+
+        let phong = Brdf::Phong {
+            diffuse: Vec3::splat(0.5),
+            specular: Vec3::ZERO,
+            exponent: 1.0,
+        };
+        let mut keys = vec![
+            key(Brdf::lambert(Vec3::splat(0.4)).unwrap(), eye, &settings),
+            key(phong, eye, &settings),
+            key(grey, Domain::Vertices { eye: Vec3::X }, &settings),
+            key(grey, Domain::Pixels { camera: &camera }, &settings),
+        ];
+        let cameras = [
+            Camera {
+                fov_y: camera.fov_y * 0.5,
+                ..camera
+            },
+            Camera { width: 9, ..camera },
+            Camera {
+                height: 9,
+                ..camera
+            },
+            Camera {
+                target: camera.target + Vec3::X,
+                ..camera
+            },
+        ];
+        keys.extend(
+            cameras
+                .iter()
+                .map(|camera| key(grey, Domain::Pixels { camera }, &settings)),
+        );
+        let changed = [
+            ReferenceSettings {
+                seed: 1,
+                ..settings
+            },
+            ReferenceSettings {
+                replicate_size: 64,
+                ..settings
+            },
+            ReferenceSettings {
+                min_replicates: 8,
+                ..settings
+            },
+            ReferenceSettings {
+                max_replicates: 8,
+                ..settings
+            },
+            ReferenceSettings {
+                target_noise: None,
+                ..settings
+            },
+            ReferenceSettings {
+                target_noise: Some(0.01),
+                ..settings
+            },
+        ];
+        keys.extend(changed.iter().map(|s| key(grey, eye, s)));
+        keys.push(base);
+        let distinct: std::collections::HashSet<_> = keys.iter().collect();
+        assert_eq!(distinct.len(), keys.len());
     }
 }
