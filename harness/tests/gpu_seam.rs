@@ -167,8 +167,7 @@ impl ShadowMethod for GpuLambert {
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {
         let shading = self.shade(camera.eye)?;
-        let frame = self.frame.as_ref().expect("updated");
-        shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
+        shadow_core::raster::render_shading("gpu-lambert", camera, self.frame.as_ref(), &shading)
     }
 }
 

@@ -209,6 +209,17 @@ impl FrameGeometry {
             .map(|o| o.bounds())
             .fold(Aabb::EMPTY, Aabb::union)
     }
+
+    /// Every vertex's world position and unit normal, the objects' vertices
+    /// one after another: the flat order of per-vertex buffers.
+    pub fn vertices(&self) -> impl Iterator<Item = (Vec3, Vec3)> + '_ {
+        self.objects.iter().flat_map(|o| {
+            o.positions()
+                .iter()
+                .copied()
+                .zip(o.normals().iter().copied())
+        })
+    }
 }
 
 /// One object in world space.

@@ -117,16 +117,7 @@ impl ShadowMethod for BentNormals {
     fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         let bvh = SceneBvh::build(frame)?;
         let offset = bvh.ray_offset();
-        let vertices: Vec<(Vec3, Vec3)> = frame
-            .objects
-            .iter()
-            .flat_map(|o| {
-                o.positions()
-                    .iter()
-                    .copied()
-                    .zip(o.normals().iter().copied())
-            })
-            .collect();
+        let vertices: Vec<(Vec3, Vec3)> = frame.vertices().collect();
         let rays = self.rays;
         self.occlusion = vertices
             .par_iter()
@@ -173,11 +164,7 @@ impl ShadowMethod for BentNormals {
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {
         let shading = self.shade(camera.eye)?;
-        let frame = self
-            .frame
-            .as_ref()
-            .ok_or_else(|| Error::stage(&self.name, "render before update"))?;
-        shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
+        shadow_core::raster::render_shading(&self.name, camera, self.frame.as_ref(), &shading)
     }
 }
 

@@ -131,10 +131,6 @@ impl ShadowMethod for Unshadowed {
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {
         let shading = self.shade(camera.eye)?;
-        let frame = self
-            .frame
-            .as_ref()
-            .ok_or_else(|| Error::stage("unshadowed", "render before update"))?;
-        shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
+        shadow_core::raster::render_shading("unshadowed", camera, self.frame.as_ref(), &shading)
     }
 }

@@ -166,16 +166,7 @@ pub fn transfer_reference(
     let start = Instant::now();
     let bvh = SceneBvh::build(frame)?;
     let offset = bvh.ray_offset();
-    let points: Vec<(Vec3, Vec3)> = frame
-        .objects
-        .iter()
-        .flat_map(|o| {
-            o.positions()
-                .iter()
-                .copied()
-                .zip(o.normals().iter().copied())
-        })
-        .collect();
+    let points: Vec<(Vec3, Vec3)> = frame.vertices().collect();
     let n = settings.order.coeff_count();
     let mut mean = vec![0.0; points.len() * n];
     let mut std_error = vec![0.0; points.len() * n];

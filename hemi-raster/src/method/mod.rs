@@ -423,11 +423,7 @@ impl ShadowMethod for HemiRaster {
 
     fn render(&mut self, camera: &Camera) -> Result<Image> {
         let shading = self.shade(camera.eye)?;
-        let frame = self
-            .frame
-            .as_ref()
-            .ok_or_else(|| Error::stage(NAME, "render before update"))?;
-        shadow_core::raster::render_vertex_colors(camera, frame, &shading.radiance)
+        shadow_core::raster::render_shading(NAME, camera, self.frame.as_ref(), &shading)
     }
 
     fn profile(&self) -> Profile {

@@ -300,11 +300,8 @@ impl ShadowMethod for OcclusionQuery {
     /// (shadow-core's rasterizer).
     fn render(&mut self, camera: &Camera) -> Result<Image> {
         let shading = self.shade(camera.eye)?;
-        let state = self
-            .state
-            .as_ref()
-            .ok_or_else(|| Error::stage(NAME, "render before update"))?;
-        shadow_core::raster::render_vertex_colors(camera, &state.frame, &shading.radiance)
+        let frame = self.state.as_ref().map(|state| &state.frame);
+        shadow_core::raster::render_shading(NAME, camera, frame, &shading)
     }
 
     fn profile(&self) -> Profile {

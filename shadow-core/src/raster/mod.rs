@@ -26,7 +26,7 @@
 use glam::{DMat3, DMat4, DVec3, DVec4, Mat4, Vec3, Vec4Swizzles};
 use rayon::prelude::*;
 
-use crate::{Camera, Error, FrameGeometry, Image, Result};
+use crate::{Camera, Error, FrameGeometry, Image, Result, VertexRadiance};
 
 /// The largest image width or height the rasterizer accepts: with 8 bits of
 /// sub-pixel precision and the guard band, edge functions of larger images
@@ -126,6 +126,20 @@ pub fn visible_surface(camera: &Camera, frame: &FrameGeometry) -> Result<Vec<Opt
             }
         });
     Ok(hits)
+}
+
+/// The `render` stage of a per-vertex method: `shading`, what its `shade`
+/// returned toward the camera's eye, interpolated over the visible
+/// triangles of `frame`, the frame of its last `update`. No frame (no
+/// update yet) is a stage error naming `method`.
+pub fn render_shading(
+    method: &str,
+    camera: &Camera,
+    frame: Option<&FrameGeometry>,
+    shading: &VertexRadiance,
+) -> Result<Image> {
+    let frame = frame.ok_or_else(|| Error::stage(method, "render before update"))?;
+    render_vertex_colors(camera, frame, &shading.radiance)
 }
 
 /// An image of per-vertex colours (`colors[object][vertex]`, e.g. a method's
