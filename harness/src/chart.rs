@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use shadow_core::{Error, Result};
 
@@ -68,72 +69,112 @@ const MAX_LABELLED: usize = 40;
 
 /// Draws `points` as PNG to `png` and SVG to `svg`, written atomically.
 pub fn speed_vs_error(points: &[Point], axes: Axes, png: &Path, svg: &Path) -> Result<()> {
+    write_chart(&Scatter { points, axes }, png, svg)
+}
+
+/// What a chart's drawing returns: plotters' errors, boxed.
+type Drawn = std::result::Result<(), Box<dyn std::error::Error>>;
+
+/// A chart that draws itself the same way on any plotters backend.
+trait Chart {
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Drawn
+    where
+        DB::ErrorType: 'static;
+}
+
+/// Draws `chart` as PNG to `png` and SVG to `svg`, each written atomically.
+fn write_chart(chart: &impl Chart, png: &Path, svg: &Path) -> Result<()> {
     let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
     let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
-    draw(root, points, axes).map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
+    chart
+        .draw(root)
+        .map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
     write_png_atomic(png, &rgb, WIDTH, HEIGHT)?;
     let mut text = String::new();
     let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
-    draw(root, points, axes).map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
+    chart
+        .draw(root)
+        .map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
     write_atomic(svg, text.as_bytes())
 }
 
-fn draw<DB: DrawingBackend>(
-    root: DrawingArea<DB, plotters::coord::Shift>,
-    points: &[Point],
+type LogLog = Cartesian2d<LogCoord<f64>, LogCoord<f64>>;
+
+/// The frame every chart draws in: `root` cleared, time per frame against
+/// error on log scales over `x` and `y`, the axes labelled as `axes` says.
+fn log_log<'a, DB: DrawingBackend + 'a>(
+    root: &'a DrawingArea<DB, Shift>,
     axes: Axes,
-) -> std::result::Result<(), Box<dyn std::error::Error>>
+    x: (f64, f64),
+    y: (f64, f64),
+) -> std::result::Result<ChartContext<'a, DB, LogLog>, Box<dyn std::error::Error>>
 where
     DB::ErrorType: 'static,
 {
     register_font()?;
-    let xy = |p: &Point| (p.error_percent.max(1e-3), p.frame_ms.max(1e-3));
-    let (x_min, x_max) = bounds(points.iter().map(|p| xy(p).0));
-    let (y_min, y_max) = bounds(points.iter().map(|p| xy(p).1));
-
     root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(axes.title, ("sans-serif", 24))
         .margin(16)
         .x_label_area_size(48)
         .y_label_area_size(72)
-        .build_cartesian_2d((x_min..x_max).log_scale(), (y_min..y_max).log_scale())?;
+        .build_cartesian_2d((x.0..x.1).log_scale(), (y.0..y.1).log_scale())?;
     chart
         .configure_mesh()
         .x_desc(axes.error)
         .y_desc(axes.time)
         .label_style(("sans-serif", 15))
         .draw()?;
+    Ok(chart)
+}
 
-    // One colour per series, one point per scene.
-    let mut series: Vec<&str> = Vec::new();
-    for p in points {
-        if !series.contains(&p.series.as_str()) {
-            series.push(&p.series);
+/// Every point in one cloud, a colour per series.
+struct Scatter<'a> {
+    points: &'a [Point],
+    axes: Axes<'a>,
+}
+
+impl Chart for Scatter<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Drawn
+    where
+        DB::ErrorType: 'static,
+    {
+        let points = self.points;
+        let xy = |p: &Point| (p.error_percent.max(1e-3), p.frame_ms.max(1e-3));
+        let x = bounds(points.iter().map(|p| xy(p).0));
+        let y = bounds(points.iter().map(|p| xy(p).1));
+        let mut chart = log_log(&root, self.axes, x, y)?;
+
+        // One colour per series, one point per scene.
+        let mut series: Vec<&str> = Vec::new();
+        for p in points {
+            if !series.contains(&p.series.as_str()) {
+                series.push(&p.series);
+            }
         }
-    }
-    for (i, name) in series.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        let mine: Vec<_> = points.iter().filter(|p| p.series == *name).collect();
-        chart
-            .draw_series(mine.iter().map(|p| Circle::new(xy(p), 6, color.filled())))?
-            .label(*name)
-            .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
-        if points.len() > MAX_LABELLED {
-            continue;
+        for (i, name) in series.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            let mine: Vec<_> = points.iter().filter(|p| p.series == *name).collect();
+            chart
+                .draw_series(mine.iter().map(|p| Circle::new(xy(p), 6, color.filled())))?
+                .label(*name)
+                .legend(move |(x, y)| Circle::new((x, y), 6, color.filled()));
+            if points.len() > MAX_LABELLED {
+                continue;
+            }
+            chart.draw_series(mine.iter().map(|p| {
+                let (x, y) = xy(p);
+                Text::new(
+                    p.label.clone(),
+                    (x * 1.04, y * 1.04),
+                    ("sans-serif", 13).into_font().color(&BLACK.mix(0.75)),
+                )
+            }))?;
         }
-        chart.draw_series(mine.iter().map(|p| {
-            let (x, y) = xy(p);
-            Text::new(
-                p.label.clone(),
-                (x * 1.04, y * 1.04),
-                ("sans-serif", 13).into_font().color(&BLACK.mix(0.75)),
-            )
-        }))?;
+        draw_legend(&mut chart)?;
+        root.present()?;
+        Ok(())
     }
-    draw_legend(&mut chart)?;
-    root.present()?;
-    Ok(())
 }
 
 /// One method family's sweep on one scene: its settings in order of cost.
@@ -176,103 +217,89 @@ pub fn pareto(
     png: &Path,
     svg: &Path,
 ) -> Result<()> {
-    let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
-    let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
-    draw_pareto(root, curves, noise_percent, axes)
-        .map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
-    write_png_atomic(png, &rgb, WIDTH, HEIGHT)?;
-    let mut text = String::new();
-    let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
-    draw_pareto(root, curves, noise_percent, axes)
-        .map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
-    write_atomic(svg, text.as_bytes())
+    let chart = Pareto {
+        curves,
+        noise_percent,
+        axes,
+    };
+    write_chart(&chart, png, svg)
 }
 
-fn draw_pareto<DB: DrawingBackend>(
-    root: DrawingArea<DB, plotters::coord::Shift>,
-    curves: &[Curve],
+/// One scene's curves, their frontiers and the reference's noise.
+struct Pareto<'a> {
+    curves: &'a [Curve],
     noise_percent: Option<f64>,
-    axes: Axes,
-) -> std::result::Result<(), Box<dyn std::error::Error>>
-where
-    DB::ErrorType: 'static,
-{
-    register_font()?;
-    let all = || curves.iter().flat_map(|c| c.points.iter());
-    let xy = |p: &(String, f64, f64)| (p.1.max(1e-3), p.2.max(1e-3));
-    let (x_min, x_max) = bounds(all().map(|p| xy(p).0).chain(noise_percent));
-    let (y_min, y_max) = bounds(all().map(|p| xy(p).1));
-    // Headroom above the slowest point for the legend.
-    let y_max = y_max * 8.0;
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(axes.title, ("sans-serif", 24))
-        .margin(16)
-        .x_label_area_size(48)
-        .y_label_area_size(72)
-        .build_cartesian_2d((x_min..x_max).log_scale(), (y_min..y_max).log_scale())?;
-    chart
-        .configure_mesh()
-        .x_desc(axes.error)
-        .y_desc(axes.time)
-        .label_style(("sans-serif", 15))
-        .draw()?;
-    if let Some(noise) = noise_percent.filter(|n| *n > x_min) {
-        chart
-            .draw_series(std::iter::once(Rectangle::new(
-                [(x_min, y_min), (noise, y_max)],
-                BLACK.mix(0.08).filled(),
-            )))?
-            .label("reference noise: errors below cannot be told apart")
-            .legend(|(x, y)| {
-                Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], BLACK.mix(0.15).filled())
-            });
-    }
-    let mut colour = 0;
-    for curve in curves {
-        let color = if curve.baseline {
-            BLACK.to_rgba()
-        } else {
-            colour += 1;
-            Palette99::pick(colour - 1).to_rgba()
-        };
-        let points: Vec<(f64, f64)> = curve.points.iter().map(xy).collect();
-        let mut sorted = points.clone();
-        sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let line = if curve.baseline {
-            chart.draw_series(DashedLineSeries::new(sorted, 8, 5, color.stroke_width(2)))?
-        } else {
-            chart.draw_series(LineSeries::new(sorted, color.stroke_width(2)))?
-        };
-        line.label(curve.family.clone()).legend(move |(x, y)| {
-            PathElement::new(vec![(x - 10, y), (x + 10, y)], color.stroke_width(2))
-        });
-        let frontier = curve.frontier();
-        chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
-            let style = if best {
-                color.filled()
+    axes: Axes<'a>,
+}
+
+impl Chart for Pareto<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Drawn
+    where
+        DB::ErrorType: 'static,
+    {
+        let (curves, noise_percent) = (self.curves, self.noise_percent);
+        let all = || curves.iter().flat_map(|c| c.points.iter());
+        let xy = |p: &(String, f64, f64)| (p.1.max(1e-3), p.2.max(1e-3));
+        let (x_min, x_max) = bounds(all().map(|p| xy(p).0).chain(noise_percent));
+        let (y_min, y_max) = bounds(all().map(|p| xy(p).1));
+        // Headroom above the slowest point for the legend.
+        let y_max = y_max * 8.0;
+        let mut chart = log_log(&root, self.axes, (x_min, x_max), (y_min, y_max))?;
+        if let Some(noise) = noise_percent.filter(|n| *n > x_min) {
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(x_min, y_min), (noise, y_max)],
+                    BLACK.mix(0.08).filled(),
+                )))?
+                .label("reference noise: errors below cannot be told apart")
+                .legend(|(x, y)| {
+                    Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], BLACK.mix(0.15).filled())
+                });
+        }
+        let mut colour = 0;
+        for curve in curves {
+            let color = if curve.baseline {
+                BLACK.to_rgba()
             } else {
-                color.stroke_width(2)
+                colour += 1;
+                Palette99::pick(colour - 1).to_rgba()
             };
-            Circle::new(p, 6, style)
-        }))?;
-        chart.draw_series(curve.points.iter().zip(&points).map(|(p, &(x, y))| {
-            Text::new(
-                p.0.clone(),
-                (x * 1.05, y * 1.05),
-                ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
-            )
-        }))?;
+            let points: Vec<(f64, f64)> = curve.points.iter().map(xy).collect();
+            let mut sorted = points.clone();
+            sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let line = if curve.baseline {
+                chart.draw_series(DashedLineSeries::new(sorted, 8, 5, color.stroke_width(2)))?
+            } else {
+                chart.draw_series(LineSeries::new(sorted, color.stroke_width(2)))?
+            };
+            line.label(curve.family.clone()).legend(move |(x, y)| {
+                PathElement::new(vec![(x - 10, y), (x + 10, y)], color.stroke_width(2))
+            });
+            let frontier = curve.frontier();
+            chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
+                let style = if best {
+                    color.filled()
+                } else {
+                    color.stroke_width(2)
+                };
+                Circle::new(p, 6, style)
+            }))?;
+            chart.draw_series(curve.points.iter().zip(&points).map(|(p, &(x, y))| {
+                Text::new(
+                    p.0.clone(),
+                    (x * 1.05, y * 1.05),
+                    ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
+                )
+            }))?;
+        }
+        draw_legend(&mut chart)?;
+        root.present()?;
+        Ok(())
     }
-    draw_legend(&mut chart)?;
-    root.present()?;
-    Ok(())
 }
 
 /// The legend of a log-log chart, in its upper right corner.
-fn draw_legend<'a, DB: DrawingBackend + 'a>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
-) -> std::result::Result<(), Box<dyn std::error::Error>>
+fn draw_legend<'a, DB: DrawingBackend + 'a>(chart: &mut ChartContext<'a, DB, LogLog>) -> Drawn
 where
     DB::ErrorType: 'static,
 {
