@@ -44,9 +44,8 @@ impl CameraFilter {
             module: &module,
             entry: "main",
             layout: &layout,
-            buffers: &[Some(Geometry::buffer_layout(0))],
+            buffers: &[Some(Geometry::POSITIONS)],
             topology: wgpu::PrimitiveTopology::TriangleList,
-            bias: Default::default(),
         };
         let camera = blank(
             ctx,
@@ -62,7 +61,12 @@ impl CameraFilter {
         );
         let count = triangles.len() / 3;
         CameraFilter {
-            prepass: pipeline.pipeline(ctx, DepthUse::Write),
+            prepass: pipeline.pipeline(
+                ctx,
+                DepthUse::Write {
+                    bias: Default::default(),
+                },
+            ),
             queries_pipeline: pipeline.pipeline(ctx, DepthUse::Test),
             group,
             camera,

@@ -54,7 +54,7 @@ const SURFACE: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
 const IMAGE: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
 /// Targets of one image size.
-struct Targets {
+pub(super) struct Targets {
     width: u32,
     height: u32,
     surface: wgpu::TextureView,
@@ -176,11 +176,16 @@ impl DeferredPass {
         &self.targets.image
     }
 
-    /// Makes the image's targets `width` × `height` unless they are.
-    pub fn resize(&mut self, ctx: &GpuContext, width: u32, height: u32) {
-        if (self.targets.width, self.targets.height) != (width, height) {
-            self.targets = Targets::new(ctx, width, height);
-        }
+    /// New targets for a `width` × `height` image, unless the current ones
+    /// are that size; [`DeferredPass::use_targets`] puts them in place once
+    /// the device has made them without error.
+    pub fn resized(&self, ctx: &GpuContext, width: u32, height: u32) -> Option<Targets> {
+        ((self.targets.width, self.targets.height) != (width, height))
+            .then(|| Targets::new(ctx, width, height))
+    }
+
+    pub fn use_targets(&mut self, targets: Targets) {
+        self.targets = targets;
     }
 
     /// The deferred pass's bindings, with this recording's parameters for

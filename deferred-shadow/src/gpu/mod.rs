@@ -187,10 +187,12 @@ impl Gpu {
         near: f32,
     ) -> Result<()> {
         let ctx = Arc::clone(&self.ctx);
-        ctx.capture("deferred-shadow: image targets", || {
-            self.deferred.resize(&ctx, camera.width, camera.height);
-            Ok(())
+        let resized = ctx.capture("deferred-shadow: image targets", || {
+            Ok(self.deferred.resized(&ctx, camera.width, camera.height))
         })?;
+        if let Some(targets) = resized {
+            self.deferred.use_targets(targets);
+        }
         ctx.capture("deferred-shadow: visible surface and deferred pass", || {
             let (scene, maps) = (&self.scene, &self.maps);
             self.deferred

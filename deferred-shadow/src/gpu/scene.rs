@@ -168,8 +168,9 @@ pub(super) fn shader(ctx: &GpuContext, label: &str, body: Source) -> wgpu::Shade
         .module(ctx, label)
 }
 
-/// A render pipeline of vertex and fragment entries `entries` pulling its
-/// vertices from storage (no vertex buffers), into one `target`.
+/// A render pipeline of the `(vertex, fragment)` entries of `module`
+/// pulling its vertices from storage (no vertex buffers), into one
+/// `target`.
 pub(super) fn pulled_pipeline(
     ctx: &GpuContext,
     layout: &wgpu::BindGroupLayout,

@@ -152,3 +152,24 @@ pub(super) fn default_weights(path: &Path, node: &::gltf::Node, count: usize) ->
         )),
     }
 }
+
+/// A GLB's 12-byte header checked before the `gltf` crate reads the file:
+/// a declared length shorter than the header makes that crate's reader
+/// subtract past zero. Anything not starting with GLB's magic passes.
+pub(super) fn check_glb_header(bytes: &[u8]) -> std::result::Result<(), String> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    match bytes.get(8..12) {
+        None => Err(format!(
+            "GLB truncated in its header ({} bytes)",
+            bytes.len()
+        )),
+        Some(b) => match u32::from_le_bytes([b[0], b[1], b[2], b[3]]) {
+            length @ 0..12 => Err(format!(
+                "GLB header declares a length of {length} bytes, less than the header itself"
+            )),
+            _ => Ok(()),
+        },
+    }
+}

@@ -67,7 +67,9 @@ use shadow_core::{Brdf, Error, Frame, Mesh, Object, Pose, Result};
 use accessor::Buffers;
 use animation::Clip;
 pub use file::SUPPORTED_EXTENSIONS;
-use file::{QUANTIZATION, default_weights, load_buffers, named, scene_nodes, validated};
+use file::{
+    QUANTIZATION, check_glb_header, default_weights, load_buffers, named, scene_nodes, validated,
+};
 pub use geometry::VertexAttribute;
 use hierarchy::Hierarchy;
 use instance::{Identity, Instance, rigid_or_morphed_instance, skinned_instance};
@@ -139,6 +141,7 @@ impl GltfAsset {
     pub fn load(path: &Path) -> Result<GltfAsset> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let bad = |what: String| Error::format(path, what);
+        check_glb_header(&bytes).map_err(bad)?;
         let raw = ::gltf::Gltf::from_slice_without_validation(&bytes)
             .map_err(|e| bad(format!("not a readable glTF or GLB file: {e}")))?;
         if let Some(name) = raw

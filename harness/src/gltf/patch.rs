@@ -175,6 +175,7 @@ pub fn write_with_attribute(
 /// JSON.
 fn parse(bytes: &[u8]) -> std::result::Result<(Value, Option<Vec<u8>>), String> {
     let (json, bin) = if bytes.starts_with(b"glTF") {
+        super::file::check_glb_header(bytes)?;
         let glb = Glb::from_slice(bytes).map_err(|e| format!("malformed GLB: {e}"))?;
         (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
     } else {
@@ -482,5 +483,26 @@ mod tests {
         let (parsed, bin) = parse(&bytes).unwrap();
         assert_eq!(parsed["asset"]["version"], "2.0");
         assert_eq!(&bin.unwrap()[..3], &[1, 2, 3]);
+        // No BIN chunk when there is no data; errors, not panics, for
+        // truncated files and short declared lengths.
+        let (_, bin) = parse(&glb(json, &[])).unwrap();
+        assert!(bin.is_none());
+        for cut in [4, 12, 20, bytes.len() - 2] {
+            assert!(parse(&bytes[..cut]).is_err(), "{cut}");
+        }
+        let mut short = bytes.clone();
+        short[8..12].copy_from_slice(&8u32.to_le_bytes());
+        assert!(parse(&short).unwrap_err().contains("less than the header"));
+    }
+
+    #[test]
+    fn uris_are_percent_coded_paths() {
+        assert_eq!(decode_uri("d%C3%A9j%C3%A0%20vu.bin"), "déjà vu.bin");
+        assert_eq!(decode_uri("100%"), "100%");
+        assert_eq!(
+            encode_uri("../tex/déjà vu.png"),
+            "../tex/d%C3%A9j%C3%A0%20vu.png"
+        );
+        assert_eq!(encode_uri("a%b"), "a%25b");
     }
 }

@@ -672,6 +672,14 @@ fn missing_truncated_and_malformed_files_are_named_errors() {
         std::fs::write(&path, &glb[..keep]).unwrap();
         load_error(&path);
     }
+    // A header declaring fewer bytes than the header itself.
+    for length in [0u32, 11] {
+        let mut short = glb.clone();
+        short[8..12].copy_from_slice(&length.to_le_bytes());
+        let path = dir.path().join(format!("short_{length}.glb"));
+        std::fs::write(&path, &short).unwrap();
+        assert!(load_error(&path).contains("less than the header"));
+    }
 
     let path = dir.path().join("broken.gltf");
     std::fs::write(

@@ -25,8 +25,9 @@ pub enum Domain<'a> {
 /// The content hash of a reference's inputs: geometry (positions, normals,
 /// triangles of every object), materials, the environment's texels, the view
 /// (eye, or the whole camera for images) and the estimator settings, each
-/// value hashed as its little-endian bytes (never as it prints). Structs are
-/// destructured whole, so that a field added to one must be added here.
+/// value hashed as its little-endian bytes (never as it prints). The
+/// material, the camera and the settings are destructured whole, so that a
+/// field added to one must be added here.
 pub fn cache_key(
     scene: &Scene,
     frame: &FrameGeometry,
@@ -382,6 +383,24 @@ mod tests {
         let mut keys = vec![
             key(Brdf::lambert(Vec3::splat(0.4)).unwrap(), eye, &settings),
             key(phong, eye, &settings),
+            key(
+                Brdf::Phong {
+                    diffuse: Vec3::splat(0.5),
+                    specular: Vec3::splat(0.1),
+                    exponent: 1.0,
+                },
+                eye,
+                &settings,
+            ),
+            key(
+                Brdf::Phong {
+                    diffuse: Vec3::splat(0.5),
+                    specular: Vec3::ZERO,
+                    exponent: 2.0,
+                },
+                eye,
+                &settings,
+            ),
             key(grey, Domain::Vertices { eye: Vec3::X }, &settings),
             key(grey, Domain::Pixels { camera: &camera }, &settings),
         ];
@@ -397,6 +416,14 @@ mod tests {
             },
             Camera {
                 target: camera.target + Vec3::X,
+                ..camera
+            },
+            Camera {
+                eye: camera.eye + Vec3::X,
+                ..camera
+            },
+            Camera {
+                up: Vec3::X,
                 ..camera
             },
         ];

@@ -56,11 +56,10 @@ impl DepthMaps {
             module: &module,
             entry: "occluder",
             layout: &layout,
-            buffers: &[Some(Geometry::buffer_layout(0))],
+            buffers: &[Some(Geometry::POSITIONS)],
             topology: wgpu::PrimitiveTopology::TriangleList,
-            bias,
         }
-        .pipeline(ctx, DepthUse::Write);
+        .pipeline(ctx, DepthUse::Write { bias });
         let texture = ctx.create_texture_2d(
             "depth atlas",
             (atlas.side(), atlas.side()),

@@ -61,16 +61,19 @@ impl Geometry {
             .write_buffer(&self.normals, 0, bytemuck::cast_slice(normals));
     }
 
-    /// The vertex buffer of positions (location 0) or normals (location 1).
-    pub(crate) fn buffer_layout(location: u32) -> wgpu::VertexBufferLayout<'static> {
-        const POSITIONS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x4];
-        const NORMALS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![1 => Float32x4];
-        wgpu::VertexBufferLayout {
-            array_stride: 16,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: if location == 0 { &POSITIONS } else { &NORMALS },
-        }
-    }
+    /// The vertex buffer of positions (location 0).
+    pub(crate) const POSITIONS: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+        array_stride: 16,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![0 => Float32x4],
+    };
+
+    /// The vertex buffer of normals (location 1).
+    pub(crate) const NORMALS: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+        array_stride: 16,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![1 => Float32x4],
+    };
 }
 
 shadow_core::wgsl_struct! {

@@ -52,12 +52,8 @@ impl QueryTest {
             module: maps.module(),
             entry: "point",
             layout: maps.layout(),
-            buffers: &[
-                Some(Geometry::buffer_layout(0)),
-                Some(Geometry::buffer_layout(1)),
-            ],
+            buffers: &[Some(Geometry::POSITIONS), Some(Geometry::NORMALS)],
             topology: wgpu::PrimitiveTopology::PointList,
-            bias: Default::default(),
         }
         .pipeline(ctx, DepthUse::Test);
         let module = Source::new()

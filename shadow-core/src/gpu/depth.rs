@@ -4,22 +4,25 @@
 use super::GpuContext;
 use super::binding::pipeline_layout;
 
-/// Float depth, so that a shader comparing against a map sees what an
-/// occlusion query's fragment would: 16-bit depth made the maps 4–6% faster
-/// on lavapipe, but its rounding made the two tests disagree away from
-/// texel edges.
+/// The depth format of every depth buffer the GPU methods draw (maps,
+/// query passes, visible surfaces). Float depth, so that a shader comparing
+/// against a map sees what an occlusion query's fragment would: 16-bit
+/// depth made occlusion-query's maps 4–6% faster on lavapipe, but its
+/// rounding made its two vertex tests disagree away from texel edges.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// Occlusion queries one query set (and so one render pass) holds at most.
 pub const QUERIES_PER_PASS: usize = wgpu::QUERY_SET_MAX_QUERIES as usize;
 
 /// What a depth-only pipeline does with the depth buffer.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum DepthUse {
-    /// Keeps the nearest depth (`Less`, written): occluders into a map.
-    Write,
+    /// Keeps the nearest depth (`Less`, written), moved by `bias` (the
+    /// polygon offset of §3.2): occluders into a map.
+    Write { bias: wgpu::DepthBiasState },
     /// Passes where a primitive lies at or in front of the stored depth
-    /// (`LessEqual`, nothing written): what an occlusion query counts.
+    /// (`LessEqual`, nothing written, no offset): what an occlusion query
+    /// counts.
     Test,
 }
 
@@ -31,13 +34,14 @@ pub struct DepthOnly<'a> {
     pub layout: &'a wgpu::BindGroupLayout,
     pub buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
     pub topology: wgpu::PrimitiveTopology,
-    /// The polygon offset (§3.2); none for [`DepthUse::Test`].
-    pub bias: wgpu::DepthBiasState,
 }
 
 impl DepthOnly<'_> {
     pub fn pipeline(&self, ctx: &GpuContext, depth: DepthUse) -> wgpu::RenderPipeline {
-        let write = depth == DepthUse::Write;
+        let (write, bias) = match depth {
+            DepthUse::Write { bias } => (true, bias),
+            DepthUse::Test => (false, wgpu::DepthBiasState::default()),
+        };
         ctx.device
             .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(self.entry),
@@ -62,7 +66,7 @@ impl DepthOnly<'_> {
                         wgpu::CompareFunction::LessEqual
                     }),
                     stencil: Default::default(),
-                    bias: self.bias,
+                    bias,
                 }),
                 multisample: Default::default(),
                 fragment: None,

@@ -6,8 +6,14 @@
 //! checks at compile time that every field lies where WGSL's layout rules
 //! put it (WGSL §14.4, "Memory Layout": a member at the next multiple of its
 //! alignment, a struct aligned to its widest member and sized to a multiple
-//! of that), so that a field added on one side only, or a `Vec3` where WGSL
-//! would pad, fails the build instead of shifting every value after it.
+//! of that), so that a `Vec3` where WGSL would pad, or a field whose Rust
+//! type does not match the size WGSL gives it, fails the build instead of
+//! shifting every value after it. A field added on one side only cannot
+//! happen: the WGSL declaration is generated. What the check does not see
+//! fails when the shader module is created (a validation error naming the
+//! struct): the extra rules of the uniform address space (nested structs
+//! and array strides on 16-byte boundaries), a field name WGSL reserves, a
+//! nested struct declared twice or not at all.
 //!
 //! ```
 //! use shadow_core::gpu::wgsl::Source;
