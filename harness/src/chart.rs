@@ -177,30 +177,51 @@ impl Chart for Scatter<'_> {
     }
 }
 
+/// One setting on a curve.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CurvePoint {
+    pub label: String,
+    pub error_percent: f64,
+    /// Median milliseconds per frame.
+    pub ms: f64,
+    /// The fastest and slowest sample, in milliseconds: drawn as a bar.
+    pub ms_range: (f64, f64),
+}
+
+impl CurvePoint {
+    /// A point whose samples all took `ms`.
+    pub fn exact(label: &str, error_percent: f64, ms: f64) -> CurvePoint {
+        CurvePoint {
+            label: label.into(),
+            error_percent,
+            ms,
+            ms_range: (ms, ms),
+        }
+    }
+}
+
 /// One method family's sweep on one scene: its settings in order of cost.
 #[derive(Clone, Debug)]
 pub struct Curve {
     pub family: String,
-    /// (setting label, error in percent, milliseconds per frame).
-    pub points: Vec<(String, f64, f64)>,
+    pub points: Vec<CurvePoint>,
     /// The line to beat (the ray tracer): drawn black and dashed.
     pub baseline: bool,
 }
 
 impl Curve {
     /// The points no other point of the curve beats on both time and error
-    /// (the family's Pareto frontier), as a mask over `points`.
+    /// (the family's Pareto frontier; median times), as a mask over
+    /// `points`.
     pub fn frontier(&self) -> Vec<bool> {
         let p = &self.points;
+        let beats = |a: &CurvePoint, b: &CurvePoint| {
+            a.error_percent <= b.error_percent
+                && a.ms <= b.ms
+                && (a.error_percent < b.error_percent || a.ms < b.ms)
+        };
         (0..p.len())
-            .map(|i| {
-                !(0..p.len()).any(|j| {
-                    j != i
-                        && p[j].1 <= p[i].1
-                        && p[j].2 <= p[i].2
-                        && (p[j].1 < p[i].1 || p[j].2 < p[i].2)
-                })
-            })
+            .map(|i| !(0..p.len()).any(|j| j != i && beats(&p[j], &p[i])))
             .collect()
     }
 }
@@ -239,9 +260,10 @@ impl Chart for Pareto<'_> {
     {
         let (curves, noise_percent) = (self.curves, self.noise_percent);
         let all = || curves.iter().flat_map(|c| c.points.iter());
-        let xy = |p: &(String, f64, f64)| (p.1.max(1e-3), p.2.max(1e-3));
+        let xy = |p: &CurvePoint| (p.error_percent.max(1e-3), p.ms.max(1e-3));
         let (x_min, x_max) = bounds(all().map(|p| xy(p).0).chain(noise_percent));
-        let (y_min, y_max) = bounds(all().map(|p| xy(p).1));
+        let (y_min, y_max) =
+            bounds(all().flat_map(|p| [p.ms_range.0, p.ms_range.1].map(|t| t.max(1e-3))));
         // Headroom above the slowest point for the legend.
         let y_max = y_max * 8.0;
         let mut chart = log_log(&root, self.axes, (x_min, x_max), (y_min, y_max))?;
@@ -275,6 +297,19 @@ impl Chart for Pareto<'_> {
             line.label(curve.family.clone()).legend(move |(x, y)| {
                 PathElement::new(vec![(x - 10, y), (x + 10, y)], color.stroke_width(2))
             });
+            // Each setting's spread of time: a bar from its fastest to its
+            // slowest sample.
+            chart.draw_series(
+                curve
+                    .points
+                    .iter()
+                    .filter(|p| p.ms_range.1 > p.ms_range.0)
+                    .map(|p| {
+                        let x = xy(p).0;
+                        let (lo, hi) = (p.ms_range.0.max(1e-3), p.ms_range.1.max(1e-3));
+                        PathElement::new(vec![(x, lo), (x, hi)], color.stroke_width(1))
+                    }),
+            )?;
             let frontier = curve.frontier();
             chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
                 let style = if best {
@@ -286,7 +321,7 @@ impl Chart for Pareto<'_> {
             }))?;
             chart.draw_series(curve.points.iter().zip(&points).map(|(p, &(x, y))| {
                 Text::new(
-                    p.0.clone(),
+                    p.label.clone(),
                     (x * 1.05, y * 1.05),
                     ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
                 )
@@ -334,11 +369,11 @@ mod tests {
         let curve = Curve {
             family: "f".into(),
             points: vec![
-                ("a".into(), 10.0, 1.0),
-                ("b".into(), 5.0, 2.0),
-                ("c".into(), 6.0, 3.0), // beaten by b on both
-                ("d".into(), 1.0, 9.0),
-                ("e".into(), 5.0, 2.0), // ties b: neither beats the other
+                CurvePoint::exact("a", 10.0, 1.0),
+                CurvePoint::exact("b", 5.0, 2.0),
+                CurvePoint::exact("c", 6.0, 3.0), // beaten by b on both
+                CurvePoint::exact("d", 1.0, 9.0),
+                CurvePoint::exact("e", 5.0, 2.0), // ties b: neither beats the other
             ],
             baseline: false,
         };
@@ -352,12 +387,18 @@ mod tests {
         let curves = [
             Curve {
                 family: "raytrace".into(),
-                points: vec![("4".into(), 20.0, 3.0), ("16".into(), 9.0, 12.0)],
+                points: vec![
+                    CurvePoint::exact("4", 20.0, 3.0),
+                    CurvePoint {
+                        ms_range: (10.0, 15.0),
+                        ..CurvePoint::exact("16", 9.0, 12.0)
+                    },
+                ],
                 baseline: true,
             },
             Curve {
                 family: "hemi-raster".into(),
-                points: vec![("pvs".into(), 3.0, 0.5)],
+                points: vec![CurvePoint::exact("pvs", 3.0, 0.5)],
                 baseline: false,
             },
         ];

@@ -19,3 +19,4 @@ pub mod run;
 pub mod scenes;
 pub mod score;
 pub mod suite;
+pub mod timing;

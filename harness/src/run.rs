@@ -9,48 +9,76 @@
 //! finished its work when it returns (GPU methods wait for their queue), so
 //! the wall clock around a stage is the stage's time.
 //!
-//! `update` is timed on its first call for each frame: a repeated call with
-//! the same geometry may find nothing to redo (a method that keeps its
-//! visibility while nothing moves), which is not what a new frame costs.
-//! Shading, rendering and relighting are timed as medians over repeats.
+//! Every stage gets at least [`MIN_SAMPLES`] samples where `repeats`
+//! allows, and reports their median with their range ([`Timing`]).
+//! `update` is what a new frame costs, and a repeated call with the same
+//! geometry may find nothing to redo (a method that keeps its visibility
+//! while nothing moves), so it is timed on its first call per frame; a
+//! scene of fewer frames than [`MIN_SAMPLES`] (a still scene) gets its
+//! update's samples by first updating to a nudged twin of the frame (every
+//! object moved by a ten-thousandth of the scene's size), untimed, so that
+//! each timed update recomputes. Shading, rendering and relighting are
+//! repeated as they are.
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use glam::{Affine3A, Vec3};
 use serde::Serialize;
 use shadow_core::{
-    Camera, Capabilities, Environment, Image, Profile, ProfileValue, Result, Scene, ShadowMethod,
-    Stage, VertexRadiance,
+    Camera, Capabilities, Environment, FrameGeometry, Image, Mesh, PosedObject, Profile,
+    ProfileValue, Result, Scene, ShadowMethod, Stage, VertexRadiance,
 };
 
 use crate::{
     reference::{ImageReference, VertexReference},
     score::{self, ErrorStats, Temporal},
+    timing::Timing,
 };
 
-/// Seconds of stage time per frame after which repeats stop.
+/// Samples every stage gets at least, unless `repeats` asks for fewer: the
+/// median of fewer is not a figure.
+pub const MIN_SAMPLES: usize = 3;
+
+/// Seconds of stage time per frame after which repeats beyond
+/// [`MIN_SAMPLES`] stop.
 pub const REPEAT_BUDGET: f64 = 2.0;
 
-/// Wall-clock seconds of each stage: the first update of the frame, medians
-/// of the others over the repeats.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+/// Wall-clock seconds of each stage: the samples of the frame's fresh
+/// updates, and of its repeated shading, rendering and (on the first frame)
+/// relighting.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimes {
+    /// Once per run.
     pub prepare: f64,
-    pub relight: f64,
-    pub update: f64,
-    pub shade: f64,
+    pub relight: Timing,
+    pub update: Timing,
+    pub shade: Timing,
     /// When the run rendered images.
-    pub render: Option<f64>,
+    pub render: Option<Timing>,
 }
 
 impl StageTimes {
-    /// What a new frame of per-vertex results costs: update + shade.
-    pub fn vertex_frame(&self) -> f64 {
-        self.update + self.shade
+    /// What a new frame of per-vertex results costs: update + shade, per
+    /// repeat.
+    pub fn vertex_frame(&self) -> Timing {
+        per_repeat(&self.update, &self.shade)
     }
 
-    /// What a new image costs: update + render.
-    pub fn image_frame(&self) -> Option<f64> {
-        self.render.map(|render| self.update + render)
+    /// What a new image costs: update + render, per repeat.
+    pub fn image_frame(&self) -> Option<Timing> {
+        self.render
+            .as_ref()
+            .map(|render| per_repeat(&self.update, render))
+    }
+}
+
+/// `update` plus `other` per repeat; a single update (timed once per frame)
+/// goes with every repeat of `other`.
+fn per_repeat(update: &Timing, other: &Timing) -> Timing {
+    match update.samples() {
+        &[once] => Timing::new(other.samples().iter().map(|s| once + s).collect()),
+        _ => update.plus(other),
     }
 }
 
@@ -108,15 +136,17 @@ impl RunResult {
             .map(|e| mean(e.into_iter()))
     }
 
-    /// The median over frames of the per-vertex time per frame.
-    pub fn frame_seconds(&self) -> f64 {
-        median(self.frames.iter().map(|f| f.times.vertex_frame()).collect())
+    /// The per-vertex time per frame: every frame's samples pooled.
+    pub fn frame_time(&self) -> Timing {
+        let frames: Vec<Timing> = self.frames.iter().map(|f| f.times.vertex_frame()).collect();
+        Timing::pooled(&frames)
     }
 
-    /// The median over frames of the time per image.
-    pub fn image_frame_seconds(&self) -> Option<f64> {
-        let times: Option<Vec<f64>> = self.frames.iter().map(|f| f.times.image_frame()).collect();
-        times.filter(|t| !t.is_empty()).map(median)
+    /// The time per image: every frame's samples pooled.
+    pub fn image_frame_time(&self) -> Option<Timing> {
+        let frames: Option<Vec<Timing>> =
+            self.frames.iter().map(|f| f.times.image_frame()).collect();
+        frames.filter(|f| !f.is_empty()).map(|f| Timing::pooled(&f))
     }
 
     /// The worst frame-to-frame change of the per-vertex error, with the
@@ -181,9 +211,9 @@ pub fn run(
 ///
 /// The order is the renderer's: prepare, relight, then per frame update,
 /// shade and render. Each frame's stages are repeated up to `repeats` times,
-/// until they have taken [`REPEAT_BUDGET`] seconds: one slow run already
-/// measures well. Relighting is timed on the first frame, after its update,
-/// so that light-dependent work has geometry to act on.
+/// at least [`MIN_SAMPLES`] and beyond that until they have taken
+/// [`REPEAT_BUDGET`] seconds. Relighting is timed on the first frame, after
+/// its update, so that light-dependent work has geometry to act on.
 pub fn run_inspecting(
     method: &mut dyn ShadowMethod,
     scene: &Scene,
@@ -198,8 +228,10 @@ pub fn run_inspecting(
     let camera = scene.camera();
     let mut frames = Vec::new();
     let (mut last_shading, mut last_image) = (None, None);
-    let mut relight = 0.0;
+    let mut relight = Timing::default();
     let frame_count = scene.frames().len().min(references.vertex.len());
+    let still = scene.frames().len() < MIN_SAMPLES;
+    let least = MIN_SAMPLES.min(repeats);
     for (index, vertex_reference) in references.vertex.iter().enumerate().take(frame_count) {
         let geometry = scene.frame_geometry(index)?;
         let image_reference = references
@@ -214,16 +246,24 @@ pub fn run_inspecting(
                 })
             })
             .transpose()?;
+        let twin = still.then(|| nudged(&geometry)).transpose()?;
         let (mut update, mut shade, mut render) = (Vec::new(), Vec::new(), Vec::new());
         let mut profiles = Vec::new();
         let (mut shading, mut image) = (None, None);
         let started = Instant::now();
-        for _ in 0..repeats {
-            if !update.is_empty() && started.elapsed().as_secs_f64() > REPEAT_BUDGET {
+        for repeat in 0..repeats {
+            if repeat >= least && started.elapsed().as_secs_f64() > REPEAT_BUDGET {
                 break;
             }
+            let fresh = match &twin {
+                Some(twin) if repeat > 0 => {
+                    method.update(twin, camera)?;
+                    true
+                }
+                _ => repeat == 0,
+            };
             let updated = timed(|| method.update(&geometry, camera))?;
-            if update.is_empty() {
+            if fresh {
                 update.push(updated);
             }
             let start = Instant::now();
@@ -235,7 +275,7 @@ pub fn run_inspecting(
                 render.push(start.elapsed());
             }
             let profile = method.profile();
-            if profiles.is_empty() {
+            if fresh {
                 profiles.push(profile.of_stages(|s| s != Stage::Relight));
             } else {
                 profiles.push(profile.of_stages(|s| s != Stage::Relight && s != Stage::Update));
@@ -247,7 +287,7 @@ pub fn run_inspecting(
                 times.push(timed(|| method.relight(environment))?);
                 profiles.push(method.profile().of_stages(|s| s == Stage::Relight));
             }
-            relight = median_secs(times);
+            relight = timing(times);
         }
         inspect(index, method)?;
         let shading = shading.expect("at least one repeat");
@@ -266,10 +306,10 @@ pub fn run_inspecting(
                 .map(|previous| score::temporal(previous, (&shading, vertex_reference))),
             times: StageTimes {
                 prepare,
-                relight,
-                update: median_secs(update),
-                shade: median_secs(shade),
-                render: (!render.is_empty()).then(|| median_secs(render)),
+                relight: relight.clone(),
+                update: timing(update),
+                shade: timing(shade),
+                render: (!render.is_empty()).then(|| timing(render)),
             },
             profile: median_profile(&profiles),
         });
@@ -294,8 +334,37 @@ fn timed(f: impl FnOnce() -> Result<()>) -> Result<Duration> {
     Ok(start.elapsed())
 }
 
-fn median_secs(d: Vec<Duration>) -> f64 {
-    median(d.into_iter().map(|d| d.as_secs_f64()).collect())
+fn timing(d: Vec<Duration>) -> Timing {
+    Timing::new(d.into_iter().map(|d| d.as_secs_f64()).collect())
+}
+
+/// `frame` with every object moved up by a ten-thousandth of its bounds'
+/// diagonal: a frame any method must recompute, that shades the same.
+fn nudged(frame: &FrameGeometry) -> Result<FrameGeometry> {
+    let offset = Vec3::Y * (frame.bounds().diagonal() * 1e-4).max(f32::MIN_POSITIVE);
+    let objects = frame
+        .objects
+        .iter()
+        .map(|object| {
+            let positions = object.positions().iter().map(|p| *p + offset).collect();
+            let mesh = Mesh::new(
+                object.name(),
+                positions,
+                Some(object.normals().to_vec()),
+                object.triangles().to_vec(),
+            )?;
+            Ok(PosedObject {
+                mesh: Arc::new(mesh),
+                transform: object
+                    .transform
+                    .map(|t| Affine3A::from_translation(offset) * t),
+            })
+        })
+        .collect::<Result<_>>()?;
+    Ok(FrameGeometry {
+        frame: frame.frame,
+        objects,
+    })
 }
 
 /// Every entry of `profiles`, its value the median over the profiles that
@@ -367,17 +436,127 @@ mod tests {
     fn time_per_frame_is_defined_per_domain() {
         let times = StageTimes {
             prepare: 9.0,
-            relight: 5.0,
-            update: 1.0,
-            shade: 2.0,
-            render: Some(4.0),
+            relight: Timing::new(vec![5.0]),
+            update: Timing::new(vec![1.0]),
+            shade: Timing::new(vec![2.0, 3.0, 2.5]),
+            render: Some(Timing::new(vec![4.0, 4.0, 6.0])),
         };
-        assert_eq!(times.vertex_frame(), 3.0);
-        assert_eq!(times.image_frame(), Some(5.0));
-        let vertex_only = StageTimes {
+        // One fresh update per frame goes with every repeat.
+        assert_eq!(times.vertex_frame().samples(), &[3.0, 4.0, 3.5]);
+        assert_eq!(times.image_frame().unwrap().median(), 5.0);
+        let repeated = StageTimes {
+            update: Timing::new(vec![1.0, 2.0, 3.0]),
             render: None,
             ..times
         };
-        assert_eq!(vertex_only.image_frame(), None);
+        assert_eq!(repeated.vertex_frame().samples(), &[3.0, 5.0, 5.5]);
+        assert_eq!(repeated.image_frame(), None);
+    }
+
+    /// A method whose update does work only when the geometry changed, as
+    /// one that keeps its visibility while nothing moves.
+    #[derive(Default)]
+    struct Lazy {
+        last: Option<Vec<Vec3>>,
+        recomputed: usize,
+        vertices: Vec<usize>,
+    }
+
+    impl ShadowMethod for Lazy {
+        fn name(&self) -> &str {
+            "lazy"
+        }
+        fn capabilities(&self) -> Capabilities {
+            Capabilities::ALL
+        }
+        fn prepare(&mut self, scene: &Scene) -> Result<()> {
+            self.vertices = scene
+                .objects()
+                .iter()
+                .map(|o| o.mesh.vertex_count())
+                .collect();
+            Ok(())
+        }
+        fn relight(&mut self, _: &Environment) -> Result<()> {
+            Ok(())
+        }
+        fn update(&mut self, frame: &FrameGeometry, _: &Camera) -> Result<()> {
+            let positions: Vec<Vec3> = frame.vertices().map(|(p, _)| p).collect();
+            if self.last.as_ref() != Some(&positions) {
+                self.recomputed += 1;
+                self.last = Some(positions);
+            }
+            Ok(())
+        }
+        fn shade(&mut self, _: Vec3) -> Result<VertexRadiance> {
+            Ok(VertexRadiance::new(
+                self.vertices.iter().map(|&n| vec![Vec3::ONE; n]).collect(),
+            ))
+        }
+        fn render(&mut self, _: &Camera) -> Result<Image> {
+            unreachable!("no image references")
+        }
+        fn profile(&self) -> Profile {
+            Profile::default()
+        }
+    }
+
+    fn reference(scene: &Scene) -> VertexReference {
+        let ones = scene
+            .objects()
+            .iter()
+            .map(|o| vec![Vec3::ONE; o.mesh.vertex_count()])
+            .collect();
+        VertexReference {
+            radiance: VertexRadiance::new(ones),
+            replicates: vec![1; scene.vertex_count()],
+            rays: 0,
+            noise: 0.0,
+            seconds: 0.0,
+        }
+    }
+
+    /// A still scene's update is sampled MIN_SAMPLES times, each a
+    /// recomputation (the nudged twin in between); an animated scene's once
+    /// per frame, and the last update of each frame is of that frame.
+    #[test]
+    fn every_timed_update_recomputes() {
+        use shadow_core::{Frame, Object, Pose, shapes};
+        let floor = Arc::new(shapes::floor("floor", Vec3::ZERO, 1.0, 2).unwrap());
+        let object = Object {
+            mesh: floor,
+            material: shadow_core::Brdf::lambert(Vec3::splat(0.5)).unwrap(),
+        };
+        let camera = Camera::framing(Vec3::ZERO, 2.0, Vec3::ONE, 8, 8).unwrap();
+        let env = Environment::uniform(Vec3::ONE);
+
+        let still = Scene::still("still", vec![object.clone()], camera).unwrap();
+        let refs = [reference(&still)];
+        let mut lazy = Lazy::default();
+        let result = run(&mut lazy, &still, &env, References::vertices(&refs), 5).unwrap();
+        let update = &result.frames[0].times.update;
+        assert!(update.len() >= MIN_SAMPLES, "{update:?}");
+        // Each timed update and each twin recomputed.
+        assert_eq!(lazy.recomputed, 2 * update.len() - 1);
+        let frame = still.frame_geometry(0).unwrap();
+        assert_eq!(
+            lazy.last.unwrap(),
+            frame.vertices().map(|(p, _)| p).collect::<Vec<_>>()
+        );
+
+        let frames = (0..4)
+            .map(|i| Frame {
+                time: i as f32,
+                poses: vec![Pose::Rigid(Affine3A::from_translation(Vec3::X * i as f32))],
+            })
+            .collect();
+        let moving = Scene::new("moving", vec![object], frames, camera).unwrap();
+        let refs: Vec<_> = (0..4).map(|_| reference(&moving)).collect();
+        let mut lazy = Lazy::default();
+        let result = run(&mut lazy, &moving, &env, References::vertices(&refs), 3).unwrap();
+        assert!(result.frames.iter().all(|f| f.times.update.len() == 1));
+        assert!(result.frames.iter().all(|f| f.times.shade.len() == 3));
+        assert_eq!(lazy.recomputed, 4);
+        assert_eq!(result.frame_time().len(), 12);
     }
 }

@@ -125,7 +125,16 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
                 assert!(image["relative_l2"].as_f64().unwrap().is_finite());
             }
             for stage in ["update", "shade"] {
-                assert!(f["times"][stage].as_f64().unwrap() >= 0.0);
+                let t = &f["times"][stage];
+                let samples = t["samples"].as_array().unwrap();
+                assert!(!samples.is_empty(), "{stage}: {t}");
+                assert!(samples.iter().all(|s| s.as_f64().unwrap() >= 0.0));
+                let (min, median, max) = (
+                    t["min"].as_f64().unwrap(),
+                    t["median"].as_f64().unwrap(),
+                    t["max"].as_f64().unwrap(),
+                );
+                assert!(min <= median && median <= max, "{stage}: {t}");
             }
         }
     }

@@ -118,7 +118,7 @@ impl AccuracyReport {
              (Cloth), 7.93% (Fight), 2.89% (Chess), 3.82% (Hand). **Radiance error** is the \
              relative L2 error of exit radiance against the converged radiance reference, \
              averaged over frames, as in report.md; p99 is the worst frame's 99th-percentile \
-             per-vertex relative error. **ms/frame** is the median over frames of update + \
+             per-vertex relative error. **ms/frame** is the median over frames and repeats of update + \
              shade. *unshadowed* ignores visibility (the upper bound); *reference transfer* \
              shades the ray-traced transfer with the environment's order-5 SH: its radiance \
              error is what SH truncation alone costs under that environment, the floor of every \

@@ -267,7 +267,7 @@ fn run_variant(
         transfer: has_transfer.then(|| score.summary()),
         breakdown: has_transfer.then(|| breakdown.finish()),
         radiance: RadianceError::over_frames(&errors),
-        frame_ms: Some(result.frame_seconds() * 1e3),
+        frame_ms: Some(result.frame_time().median() * 1e3),
     })
 }
 

@@ -122,7 +122,8 @@ pub struct ScoringArgs {
     pub estimator: EstimatorArgs,
     #[command(flatten)]
     pub image: ImageArgs,
-    /// Repeats per stage; medians are reported.
+    /// Repeats per stage: each stage is timed at least three times (where this
+    /// allows) and reported as its median and range.
     #[arg(long, default_value_t = 3)]
     pub repeats: usize,
 }

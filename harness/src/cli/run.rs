@@ -135,10 +135,10 @@ fn frame_table(result: &RunResult) -> String {
             f.vertex.relative_l2 * 100.0,
             f.vertex.p99 * 100.0,
             f.vertex.max * 100.0,
-            f.times.update * 1e3,
-            f.times.shade * 1e3,
-            f.times.render.unwrap_or(0.0) * 1e3,
-            f.times.relight * 1e3,
+            f.times.update.median() * 1e3,
+            f.times.shade.median() * 1e3,
+            f.times.render.as_ref().map_or(0.0, |r| r.median()) * 1e3,
+            f.times.relight.median() * 1e3,
         );
         for line in f.profile.to_string().lines() {
             text += &format!("       {line}\n");
@@ -151,11 +151,11 @@ fn frame_table(result: &RunResult) -> String {
         );
     }
     text += &format!(
-        "time per frame: {:.2} ms per vertex (update + shade), {} per image (update + render)\n",
-        result.frame_seconds() * 1e3,
+        "time per frame (median, range): {} per vertex (update + shade), {} per image (update + render)\n",
+        result.frame_time().describe_ms(),
         result
-            .image_frame_seconds()
-            .map_or("–".into(), |s| format!("{:.2} ms", s * 1e3))
+            .image_frame_time()
+            .map_or("–".into(), |t| t.describe_ms())
     );
     text
 }

@@ -4,9 +4,10 @@
 use super::Report;
 use super::render::setting_label;
 use crate::{
-    chart::{Axes, Curve},
+    chart::{Axes, Curve, CurvePoint},
     run::RunResult,
     suite::RAY_TRACER,
+    timing::Timing,
 };
 
 /// The two domains a run is scored in.
@@ -31,13 +32,13 @@ impl Domain {
         }
     }
 
-    /// (error in percent, milliseconds per frame) of a run in this domain.
-    pub(super) fn point(self, r: &RunResult) -> Option<(f64, f64)> {
+    /// (error in percent, time per frame) of a run in this domain.
+    pub(super) fn point(self, r: &RunResult) -> Option<(f64, Timing)> {
         match self {
-            Domain::Vertex => Some((f64::from(r.mean_error()) * 100.0, r.frame_seconds() * 1e3)),
+            Domain::Vertex => Some((f64::from(r.mean_error()) * 100.0, r.frame_time())),
             Domain::Image => Some((
                 f64::from(r.mean_image_error()?) * 100.0,
-                r.image_frame_seconds()? * 1e3,
+                r.image_frame_time()?,
             )),
         }
     }
@@ -49,15 +50,20 @@ impl Report {
         self.families
             .iter()
             .filter_map(|f| {
-                let mut points: Vec<(String, f64, f64)> = self
+                let mut points: Vec<CurvePoint> = self
                     .runs_of(scene)
                     .filter(|r| r.family == f.family)
                     .filter_map(|r| {
-                        let (e, t) = domain.point(&r.result)?;
-                        Some((setting_label(&r.setting), e, t))
+                        let (error_percent, time) = domain.point(&r.result)?;
+                        Some(CurvePoint {
+                            label: setting_label(&r.setting),
+                            error_percent,
+                            ms: time.median() * 1e3,
+                            ms_range: (time.min() * 1e3, time.max() * 1e3),
+                        })
                     })
                     .collect();
-                points.sort_by(|a, b| a.2.total_cmp(&b.2));
+                points.sort_by(|a, b| a.ms.total_cmp(&b.ms));
                 (!points.is_empty()).then(|| Curve {
                     family: f.family.to_string(),
                     points,

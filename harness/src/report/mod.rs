@@ -40,7 +40,8 @@ pub struct Settings {
     pub image_target_noise: f32,
     /// Width of the scored images (each scene camera's aspect kept).
     pub image_width: u32,
-    /// Repeats per stage (medians reported).
+    /// Repeats per stage (at least three samples where it allows; medians
+    /// and ranges reported).
     pub repeats: usize,
     /// Seed of the references' random streams.
     pub seed: u64,

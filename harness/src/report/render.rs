@@ -12,6 +12,7 @@ use crate::{
     run::FrameResult,
     score::ErrorStats,
     suite::Suite,
+    timing::Timing,
 };
 
 /// The overall charts: every run of every scene.
@@ -48,12 +49,12 @@ impl Report {
         for (domain, file) in [Domain::Vertex, Domain::Image].into_iter().zip(OVERVIEW) {
             let points: Vec<Point> = (self.runs.iter())
                 .filter_map(|r| {
-                    let (error_percent, frame_ms) = domain.point(&r.result)?;
+                    let (error_percent, time) = domain.point(&r.result)?;
                     Some(Point {
                         series: r.family.clone(),
                         label: format!("{} {}", r.result.scene, setting_label(&r.setting)),
                         error_percent,
-                        frame_ms,
+                        frame_ms: time.median() * 1e3,
                     })
                 })
                 .collect();
@@ -87,9 +88,11 @@ impl Report {
             "p99#",
             "max#",
             "ms per frame#",
+            "ms per frame, range",
             "image error#",
             "image p99#",
             "ms per image#",
+            "ms per image, range",
             "flicker#",
             "relight ms#",
             "prepare ms#",
@@ -116,6 +119,13 @@ impl Report {
                 v.map_or("–".to_string(), |v| format!("{:.*}%", digits, v * 100.0))
             };
             let ms = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{:.2}", v * 1e3));
+            let median = |t: Option<&Timing>| ms(t.map(Timing::median));
+            let range = |t: Option<&Timing>| match t {
+                None => "–".to_string(),
+                Some(t) if t.len() < 2 => format!("{} sample", t.len()),
+                Some(t) => format!("{:.2}–{:.2}", t.min() * 1e3, t.max() * 1e3),
+            };
+            let (frame, image_frame) = (r.frame_time(), r.image_frame_time());
             let evaluated = r.evaluated_fraction();
             let vertex_error = if evaluated < 1.0 {
                 format!(
@@ -143,7 +153,7 @@ impl Report {
                         let i = c
                             .points
                             .iter()
-                            .position(|p| p.0 == setting_label(&run.setting))?;
+                            .position(|p| p.label == setting_label(&run.setting))?;
                         c.frontier()[i].then_some(domain.key())
                     })
             };
@@ -151,7 +161,7 @@ impl Report {
                 .into_iter()
                 .filter_map(on_frontier)
                 .collect();
-            let first = r.frames.first().map(|f| f.times);
+            let first = r.frames.first().map(|f| &f.times);
             let mut row = vec![
                 r.scene.clone(),
                 run.family.clone(),
@@ -159,12 +169,14 @@ impl Report {
                 vertex_error,
                 percent(worst(|e| e.p99, vertex), 1),
                 percent(worst(|e| e.max, vertex), 1),
-                ms(Some(r.frame_seconds())),
+                median(Some(&frame)),
+                range(Some(&frame)),
                 percent(r.mean_image_error(), 2),
                 percent(worst(|e| e.p99, image), 1),
-                ms(r.image_frame_seconds()),
+                median(image_frame.as_ref()),
+                range(image_frame.as_ref()),
                 flicker,
-                ms(first.map(|t| t.relight)),
+                median(first.map(|t| &t.relight)),
                 ms(first.map(|t| t.prepare)),
                 frontier.join(", "),
             ];
@@ -344,9 +356,10 @@ impl Report {
                     (None, _) => "–".to_string(),
                     (Some(((e, t), setting)), image) => {
                         let image = image.map_or(String::new(), |((e, t), _)| {
-                            format!("; {e:.2}% per pixel at {t:.1} ms")
+                            format!("; {e:.2}% per pixel at {:.1} ms", t.median() * 1e3)
                         });
-                        format!("{e:.2}% at {t:.1} ms ({}){image}", setting_label(setting))
+                        let ms = t.median() * 1e3;
+                        format!("{e:.2}% at {ms:.1} ms ({}){image}", setting_label(setting))
                     }
                 };
                 row.push(cell);

@@ -5,6 +5,7 @@ use crate::reference::ImageReferenceInfo;
 use crate::run::{FrameResult, StageTimes};
 use crate::score::{ErrorStats, Temporal};
 use crate::suite::RAY_TRACER;
+use crate::timing::Timing;
 
 fn stats(error: f32) -> ErrorStats {
     ErrorStats {
@@ -32,10 +33,10 @@ fn run(scene: &str, family: &str, setting: &str, error: f32, ms: f64) -> ReportR
             }),
             times: StageTimes {
                 prepare: 0.1,
-                relight: 0.01,
-                update: ms / 2e3,
-                shade: ms / 2e3,
-                render: Some(ms / 1e3),
+                relight: Timing::new(vec![0.01]),
+                update: Timing::new(vec![ms / 2e3]),
+                shade: Timing::new(vec![ms / 2e3; 3]),
+                render: Some(Timing::new(vec![ms / 1e3; 3])),
             },
             profile: Profile::default(),
         })
