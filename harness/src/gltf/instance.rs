@@ -140,6 +140,20 @@ pub(super) struct Identity {
     pub(super) attributes: BTreeMap<String, VertexAttribute>,
 }
 
+impl Identity {
+    /// The instance of this node, of `mesh` moving as `motion` says.
+    fn instance(self, mesh: Arc<Mesh>, motion: Motion) -> Instance {
+        Instance {
+            node: self.node,
+            source: self.source,
+            attributes: self.attributes,
+            label: self.label,
+            mesh,
+            motion,
+        }
+    }
+}
+
 /// A validated mesh, its errors naming the file and the node and mesh.
 fn build_mesh(
     path: &Path,
@@ -184,18 +198,14 @@ pub(super) fn skinned_instance(
         geometry.normals.clone(),
         geometry.triangles,
     )?;
-    Ok(Instance {
-        node: id.node,
-        source: id.source,
-        attributes: id.attributes,
-        label: id.label,
+    Ok(id.instance(
         mesh,
-        motion: Motion::Skinned {
+        Motion::Skinned {
             skin,
             morph,
             normals: geometry.normals,
         },
-    })
+    ))
 }
 
 pub(super) fn rigid_or_morphed_instance(
@@ -242,12 +252,5 @@ pub(super) fn rigid_or_morphed_instance(
     } else {
         Motion::Rigid { mirrored }
     };
-    Ok(Instance {
-        node: id.node,
-        source: id.source,
-        attributes: id.attributes,
-        label: id.label,
-        mesh,
-        motion,
-    })
+    Ok(id.instance(mesh, motion))
 }
