@@ -139,6 +139,8 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
         }
     }
 
+    check_recommendations(&json, &md);
+
     // The atlas: every stress scene of the suite with every atlas setting,
     // a sentence each; a refusal names the capability.
     let atlas = json["atlas"].as_array().unwrap();
@@ -192,6 +194,112 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
     }
 
     browser_check(&out.join("index.html"));
+}
+
+/// A run's (error in percent, median milliseconds per frame) in `domain`
+/// (`vertex` or `image`), recomputed from its frames: the mean error over
+/// frames; each frame's update (one sample, or one per repeat) plus each
+/// repeat of shade or render, every frame's samples pooled.
+fn score(run: &Value, domain: &str) -> Option<(f64, f64)> {
+    let frames = run["frames"].as_array().unwrap();
+    let stage = if domain == "vertex" {
+        "shade"
+    } else {
+        "render"
+    };
+    let mut errors = Vec::new();
+    let mut times = Vec::new();
+    for f in frames {
+        errors.push(f[domain]["relative_l2"].as_f64()?);
+        let samples = |t: &Value| -> Vec<f64> {
+            t["samples"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        };
+        let update = samples(&f["times"]["update"]);
+        let other = samples(f["times"].get(stage).filter(|t| !t.is_null())?);
+        match update.as_slice() {
+            [once] => times.extend(other.iter().map(|o| once + o)),
+            _ => times.extend(update.iter().zip(&other).map(|(u, o)| u + o)),
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    let median = times[times.len() / 2];
+    Some((100.0 * mean(errors.into_iter()), median * 1e3))
+}
+
+/// Every recommendation of report.json, recomputed from the runs: the
+/// picked setting meets its budget and no other run beats it (beyond the
+/// f32 rounding of the stored errors); "none" where no run meets it; and
+/// the page names each pick with its figures.
+fn check_recommendations(json: &Value, md: &str) {
+    let runs = json["runs"].as_array().unwrap();
+    let recommendations = json["recommendations"].as_array().unwrap();
+    assert!(!recommendations.is_empty());
+    const SLACK: f64 = 1e-4;
+    for r in recommendations {
+        let (scene, domain) = (r["scene"].as_str().unwrap(), r["domain"].as_str().unwrap());
+        let scored: Vec<(&str, f64, f64)> = runs
+            .iter()
+            .filter(|run| run["scene"] == scene)
+            .filter_map(|run| {
+                let (e, t) = score(run, domain)?;
+                Some((run["setting"].as_str().unwrap(), e, t))
+            })
+            .collect();
+        let budget = &r["budget"];
+        let by_error = budget["kind"] == "error";
+        let limit = budget[if by_error { "percent" } else { "ms" }]
+            .as_f64()
+            .unwrap();
+        let meets = |e: f64, t: f64| {
+            if by_error {
+                e <= limit + SLACK
+            } else {
+                t <= limit * (1.0 + SLACK)
+            }
+        };
+        let better = |(e, t): (f64, f64), (pe, pt): (f64, f64)| {
+            if by_error {
+                t < pt * (1.0 - SLACK)
+            } else {
+                e < pe - SLACK
+            }
+        };
+        match r["setting"].as_str() {
+            // Only a run on the budget's edge may differ by rounding.
+            None => assert!(
+                scored.iter().all(|&(_, e, t)| {
+                    let strictly = if by_error {
+                        e < limit - SLACK
+                    } else {
+                        t < limit * (1.0 - SLACK)
+                    };
+                    !strictly
+                }),
+                "{r}: some run meets it: {scored:?}"
+            ),
+            Some(setting) => {
+                let &(_, pe, pt) = scored.iter().find(|s| s.0 == setting).unwrap();
+                assert!(meets(pe, pt), "{r}: {setting} at {pe}%, {pt} ms");
+                for &(other, e, t) in &scored {
+                    assert!(
+                        !(meets(e, t) && better((e, t), (pe, pt))),
+                        "{r}: {other} ({e}%, {t} ms) beats {setting} ({pe}%, {pt} ms)"
+                    );
+                }
+                let cell = format!(
+                    "{setting} ({:.2}%, {:.1} ms)",
+                    r["score"]["error_percent"].as_f64().unwrap(),
+                    r["score"]["ms"].as_f64().unwrap()
+                );
+                assert!(md.contains(&cell), "the page does not name {cell}");
+            }
+        }
+    }
 }
 
 /// Opens the page in headless Chromium: no console or page errors, every

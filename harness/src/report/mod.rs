@@ -15,6 +15,7 @@ mod atlas;
 mod collect;
 mod document;
 mod machine;
+mod recommend;
 mod render;
 #[cfg(test)]
 mod tests;
@@ -30,6 +31,7 @@ pub use atlas::{AtlasRun, AtlasScene, Outcome};
 pub use collect::{Plan, collect};
 pub use document::{Block, Document, Figure, Table};
 pub use machine::MachineInfo;
+pub use recommend::{Budget, ERROR_BUDGETS, MARGIN, Recommendation, Score, TIME_BUDGETS_MS};
 
 /// How the report was run: everything needed to run it again.
 #[derive(Clone, Debug, Serialize)]

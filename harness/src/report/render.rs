@@ -2,9 +2,12 @@
 
 use std::path::Path;
 
+use serde::Serialize;
+
 use shadow_core::Result;
 
 use super::analyse::Domain;
+use super::recommend::{Budget, MARGIN, Recommendation};
 use super::{Block, Document, Figure, Report, ReportRun, Table, atlas};
 use crate::{
     chart::{self, Axes, Point},
@@ -14,6 +17,23 @@ use crate::{
     suite::Suite,
     timing::Timing,
 };
+
+/// `report.json`: everything measured, and what it recommends.
+#[derive(Serialize)]
+struct Written<'a> {
+    #[serde(flatten)]
+    report: &'a Report,
+    recommendations: Vec<Recommendation>,
+}
+
+impl<'a> Written<'a> {
+    fn new(report: &'a Report) -> Written<'a> {
+        Written {
+            report,
+            recommendations: report.recommendations(),
+        }
+    }
+}
 
 /// The overall charts: every run of every scene.
 const OVERVIEW: [&str; 2] = ["speed-vs-error.png", "speed-vs-error-image.png"];
@@ -63,7 +83,7 @@ impl Report {
                 chart::speed_vs_error(&points, domain.axes(), &png, &png.with_extension("svg"))?;
             }
         }
-        write_json_atomic(&dir.join("report.json"), self)?;
+        write_json_atomic(&dir.join("report.json"), &Written::new(self))?;
         write_atomic(&dir.join("report.csv"), self.runs_table().csv().as_bytes())?;
         let document = self.document(dir);
         write_atomic(&dir.join("report.md"), document.markdown().as_bytes())?;
@@ -211,8 +231,9 @@ impl Report {
              per vertex over the vertices a method evaluated, per pixel over the pixels the reference \
              covers (a pixel the method leaves uncovered counts as zero). p99 and max are per-element \
              relative errors (floor 1% of the RMS radiance), the worst over frames. Time per frame is \
-             update + shade per vertex, update + render per image; relighting is timed apart; update \
-             on its first call for each frame, the other stages medians of repeated runs. Flicker is \
+             update + shade per vertex, update + render per image; relighting is timed apart. Each \
+             stage is timed at least three times (a still scene's update made fresh each time) and \
+             reported as the median, with the range in the tables and as bars on the charts. Flicker is \
              the worst frame-to-frame change of the per-vertex error, sqrt(Σ|e_t − e_t−1|² / Σ|r_t|²), \
              beside how much the reference itself changes and the part the references' noise explains. \
              Each chart draws a family's settings as one curve, filled points on its frontier (no other \
@@ -222,12 +243,30 @@ impl Report {
         ));
         if let Some(summary) = self.summary() {
             doc.push(Block::Heading(2, "Summary".into()));
+            doc.push(Block::Paragraph(format!(
+                "Per scene and family, the fastest setting whose error is within {:.0}% of the \
+                 family's best on that scene, per vertex (error, median time per frame) and per \
+                 pixel.",
+                (MARGIN - 1.0) * 100.0
+            )));
+            doc.push(Block::Table(summary));
+            let recommendations = self.recommendations();
+            doc.push(Block::Heading(2, "Recommendations".into()));
             doc.push(Block::Paragraph(
-                "Per scene and family, the most accurate setting per vertex (error, time per frame) \
-                 and per pixel."
+                "Per scene, for each error budget the fastest setting that meets it, and for each \
+                 time budget per frame (on this host) the most accurate setting within it; \
+                 \"none\" where no setting run does."
                     .into(),
             ));
-            doc.push(Block::Table(summary));
+            for (domain, what) in [(Domain::Vertex, "Per vertex"), (Domain::Image, "Per pixel")] {
+                let table = self.recommendations_table(&recommendations, domain);
+                if !table.rows.is_empty() {
+                    doc.push(Block::Paragraph(format!("{what}:")));
+                    doc.push(Block::Table(table));
+                }
+            }
+            doc.push(Block::Heading(2, "Which method when".into()));
+            doc.push(Block::Bullets(self.which_method_when()));
             let overview: Vec<Figure> = OVERVIEW
                 .iter()
                 .filter(|f| dir.join("charts").join(f).exists())
@@ -313,7 +352,7 @@ impl Report {
             ),
             format!("repeats per stage: {}", s.repeats),
             format!(
-                "command: `cargo run --release -p harness -- report --suite {suite} --target {} --image-target {} --image {} --seed {} --repeats {}`",
+                "command: `cargo run --release -p harness -- report --suite {suite} --target {} --image-target {} --image-width {} --seed {} --repeats {}`",
                 s.target_noise, s.image_target_noise, s.image_width, s.seed, s.repeats
             ),
             format!(
@@ -331,42 +370,74 @@ impl Report {
         doc
     }
 
-    /// Scenes × families: each family's most accurate setting.
+    /// Scenes × families: each family's fastest setting within [`MARGIN`]
+    /// of its best error, per vertex and per pixel.
     pub(super) fn summary(&self) -> Option<Table> {
         if self.runs.is_empty() {
             return None;
         }
-        let mut columns = vec!["scene".to_string()];
-        columns.extend(self.families.iter().map(|f| f.family.to_string()));
-        let mut table = Table {
-            numeric: vec![false; columns.len()],
-            header: columns,
-            rows: Vec::new(),
-        };
+        let mut columns = vec!["scene"];
+        columns.extend(self.families.iter().map(|f| f.family));
+        let mut table = Table::new(&columns);
         for scene in self.scenes() {
             let mut row = vec![scene.to_string()];
             for family in &self.families {
-                let best = |domain: Domain| {
-                    self.runs_of(scene)
-                        .filter(|r| r.family == family.family)
-                        .filter_map(|r| Some((domain.point(&r.result)?, &r.setting)))
-                        .min_by(|a, b| a.0.0.total_cmp(&b.0.0))
-                };
-                let cell = match (best(Domain::Vertex), best(Domain::Image)) {
+                let pick = |domain| self.family_pick(scene, family.family, domain);
+                let cell = match (pick(Domain::Vertex), pick(Domain::Image)) {
                     (None, _) => "–".to_string(),
-                    (Some(((e, t), setting)), image) => {
-                        let image = image.map_or(String::new(), |((e, t), _)| {
-                            format!("; {e:.2}% per pixel at {:.1} ms", t.median() * 1e3)
+                    (Some((run, v)), image) => {
+                        let image = image.map_or(String::new(), |(run, p)| {
+                            format!(
+                                "; {:.2}% per pixel at {:.1} ms ({})",
+                                p.error_percent,
+                                p.ms,
+                                setting_label(&run.setting)
+                            )
                         });
-                        let ms = t.median() * 1e3;
-                        format!("{e:.2}% at {ms:.1} ms ({}){image}", setting_label(setting))
+                        format!(
+                            "{:.2}% at {:.1} ms ({}){image}",
+                            v.error_percent,
+                            v.ms,
+                            setting_label(&run.setting)
+                        )
                     }
                 };
                 row.push(cell);
             }
-            table.rows.push(row);
+            table.row(row);
         }
         Some(table)
+    }
+
+    /// Scenes × budgets in one domain: the setting each budget picks.
+    fn recommendations_table(&self, recommendations: &[Recommendation], domain: Domain) -> Table {
+        let budgets: Vec<Budget> = Budget::all().collect();
+        let labels: Vec<String> = budgets.iter().map(|b| b.label()).collect();
+        let mut columns = vec!["scene"];
+        columns.extend(labels.iter().map(String::as_str));
+        let mut table = Table::new(&columns);
+        for scene in self.scenes() {
+            let mine: Vec<&Recommendation> = recommendations
+                .iter()
+                .filter(|r| r.scene == scene && r.domain == domain.key())
+                .collect();
+            if mine.is_empty() {
+                continue;
+            }
+            let mut row = vec![scene.to_string()];
+            for budget in &budgets {
+                let cell = mine
+                    .iter()
+                    .find(|r| r.budget == *budget)
+                    .and_then(|r| Some((r.setting.as_ref()?, r.score?)))
+                    .map_or("none".to_string(), |(setting, s)| {
+                        format!("{setting} ({:.2}%, {:.1} ms)", s.error_percent, s.ms)
+                    });
+                row.push(cell);
+            }
+            table.row(row);
+        }
+        table
     }
 
     fn references_table(&self) -> Table {

@@ -1,0 +1,232 @@
+//! What the runs recommend, per scene and domain: the fastest setting that
+//! meets each error budget, the most accurate within each time budget, and
+//! per family the fastest setting within [`MARGIN`] of its best error;
+//! and the sentences of "Which method when", each made from those figures.
+
+use serde::Serialize;
+
+use super::analyse::Domain;
+use super::{Report, ReportRun};
+
+/// Error budgets: relative L2 error in percent.
+pub const ERROR_BUDGETS: [f64; 3] = [2.0, 5.0, 10.0];
+
+/// Time budgets per frame on the report's host, in milliseconds.
+pub const TIME_BUDGETS_MS: [f64; 3] = [1.0, 16.0, 100.0];
+
+/// A family's setting in the summary: the fastest whose error is at most
+/// this factor times the family's best on the scene.
+pub const MARGIN: f64 = 1.1;
+
+/// A run's figures in one domain: mean error over frames, median time per
+/// frame.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Score {
+    pub error_percent: f64,
+    pub ms: f64,
+}
+
+/// What a recommendation answers.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Budget {
+    /// The fastest setting with at most this error.
+    Error { percent: f64 },
+    /// The most accurate setting within this time per frame.
+    Time { ms: f64 },
+}
+
+impl Budget {
+    /// Every budget, errors first.
+    pub fn all() -> impl Iterator<Item = Budget> {
+        let errors = ERROR_BUDGETS.map(|percent| Budget::Error { percent });
+        let times = TIME_BUDGETS_MS.map(|ms| Budget::Time { ms });
+        errors.into_iter().chain(times)
+    }
+
+    /// "≤ 2% error" or "≤ 16 ms".
+    pub fn label(self) -> String {
+        match self {
+            Budget::Error { percent } => format!("≤ {percent}% error"),
+            Budget::Time { ms } => format!("≤ {ms} ms"),
+        }
+    }
+}
+
+/// The setting a budget picks on a scene, in one domain.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Recommendation {
+    pub scene: String,
+    /// `vertex` or `image`.
+    pub domain: &'static str,
+    pub budget: Budget,
+    /// The method name of the setting, `None` when no setting meets the
+    /// budget.
+    pub setting: Option<String>,
+    pub family: Option<String>,
+    pub score: Option<Score>,
+}
+
+impl Domain {
+    /// A run's score in this domain.
+    pub(super) fn score(self, run: &ReportRun) -> Option<Score> {
+        let (error_percent, time) = self.point(&run.result)?;
+        Some(Score {
+            error_percent,
+            ms: time.median() * 1e3,
+        })
+    }
+}
+
+/// The run `budget` picks among `runs`: the fastest meeting an error
+/// budget (ties: the more accurate, then the name), the most accurate
+/// within a time budget (ties: the faster, then the name).
+fn pick<'a>(
+    runs: impl Iterator<Item = (&'a ReportRun, Score)>,
+    budget: Budget,
+) -> Option<(&'a ReportRun, Score)> {
+    let key = |(run, s): &(&ReportRun, Score)| match budget {
+        Budget::Error { .. } => (s.ms, s.error_percent, run.setting.clone()),
+        Budget::Time { .. } => (s.error_percent, s.ms, run.setting.clone()),
+    };
+    runs.filter(|(_, s)| match budget {
+        Budget::Error { percent } => s.error_percent <= percent,
+        Budget::Time { ms } => s.ms <= ms,
+    })
+    .min_by(|a, b| {
+        let (a, b) = (key(a), key(b));
+        a.0.total_cmp(&b.0)
+            .then(a.1.total_cmp(&b.1))
+            .then_with(|| a.2.cmp(&b.2))
+    })
+}
+
+impl Report {
+    /// The runs of `scene` scored in `domain`.
+    fn scored<'a>(
+        &'a self,
+        scene: &'a str,
+        domain: Domain,
+    ) -> impl Iterator<Item = (&'a ReportRun, Score)> + 'a {
+        self.runs_of(scene)
+            .filter_map(move |r| Some((r, domain.score(r)?)))
+    }
+
+    /// Every scene × domain × budget, in that order; a domain no run of the
+    /// scene was scored in is left out.
+    pub fn recommendations(&self) -> Vec<Recommendation> {
+        let mut out = Vec::new();
+        for scene in self.scenes() {
+            for domain in [Domain::Vertex, Domain::Image] {
+                if self.scored(scene, domain).next().is_none() {
+                    continue;
+                }
+                for budget in Budget::all() {
+                    let picked = pick(self.scored(scene, domain), budget);
+                    out.push(Recommendation {
+                        scene: scene.to_string(),
+                        domain: domain.key(),
+                        budget,
+                        setting: picked.map(|(r, _)| r.setting.clone()),
+                        family: picked.map(|(r, _)| r.family.clone()),
+                        score: picked.map(|(_, s)| s),
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// `family`'s setting for the summary on `scene`: the fastest whose
+    /// error is within [`MARGIN`] of the family's best there.
+    pub(super) fn family_pick<'a>(
+        &'a self,
+        scene: &'a str,
+        family: &'a str,
+        domain: Domain,
+    ) -> Option<(&'a ReportRun, Score)> {
+        let runs = || {
+            self.scored(scene, domain)
+                .filter(|(r, _)| r.family == family)
+        };
+        let best = runs()
+            .map(|(_, s)| s.error_percent)
+            .min_by(f64::total_cmp)?;
+        pick(
+            runs(),
+            Budget::Error {
+                percent: best * MARGIN,
+            },
+        )
+    }
+
+    /// "Which method when": per family, the budgets it is picked for and on
+    /// which scenes; per scene where both kinds ran, the best per-pixel
+    /// method's image against the best per-vertex method's.
+    pub fn which_method_when(&self) -> Vec<String> {
+        let recommendations = self.recommendations();
+        let mut sentences = Vec::new();
+        for sweep in &self.families {
+            let mut picked: Vec<(String, Vec<&str>)> = Vec::new();
+            for r in recommendations
+                .iter()
+                .filter(|r| r.family.as_deref() == Some(sweep.family))
+            {
+                let what = match r.budget {
+                    Budget::Error { percent } => {
+                        format!("the fastest to {percent}% {}", domain_words(r.domain))
+                    }
+                    Budget::Time { ms } => format!(
+                        "the most accurate {} within {ms} ms",
+                        domain_words(r.domain)
+                    ),
+                };
+                match picked.iter_mut().find(|(w, _)| *w == what) {
+                    Some((_, scenes)) => scenes.push(&r.scene),
+                    None => picked.push((what, vec![&r.scene])),
+                }
+            }
+            sentences.push(if picked.is_empty() {
+                format!(
+                    "{}: picked for no budget on any scene of this run.",
+                    sweep.family
+                )
+            } else {
+                let parts: Vec<String> = picked
+                    .iter()
+                    .map(|(what, scenes)| format!("{what} on {}", scenes.join(", ")))
+                    .collect();
+                format!("{}: {}.", sweep.family, parts.join("; "))
+            });
+        }
+        for scene in self.scenes() {
+            let best = |per_pixel: bool| {
+                self.scored(scene, Domain::Image)
+                    .filter(|(r, _)| r.result.capabilities.per_pixel == per_pixel)
+                    .min_by(|a, b| a.1.error_percent.total_cmp(&b.1.error_percent))
+            };
+            if let (Some((pixel, p)), Some((vertex, v))) = (best(true), best(false)) {
+                let (better, ratio) = if p.error_percent <= v.error_percent {
+                    ("per-pixel", v.error_percent / p.error_percent.max(1e-9))
+                } else {
+                    ("per-vertex", p.error_percent / v.error_percent.max(1e-9))
+                };
+                sentences.push(format!(
+                    "On {scene}, per pixel: the best per-pixel method, {} ({:.2}% at {:.1} ms), \
+                     against the best per-vertex method's interpolated image, {} ({:.2}% at \
+                     {:.1} ms): {better} {ratio:.1}× lower error.",
+                    pixel.setting, p.error_percent, p.ms, vertex.setting, v.error_percent, v.ms,
+                ));
+            }
+        }
+        sentences
+    }
+}
+
+fn domain_words(domain: &str) -> &'static str {
+    if domain == "image" {
+        "per pixel"
+    } else {
+        "per vertex"
+    }
+}
