@@ -80,18 +80,24 @@ trait Chart {
     fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Drawn
     where
         DB::ErrorType: 'static;
+
+    /// Width and height in pixels.
+    fn size(&self) -> (u32, u32) {
+        (WIDTH, HEIGHT)
+    }
 }
 
 /// Draws `chart` as PNG to `png` and SVG to `svg`, each written atomically.
 fn write_chart(chart: &impl Chart, png: &Path, svg: &Path) -> Result<()> {
-    let mut rgb = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
-    let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH, HEIGHT)).into_drawing_area();
+    let (width, height) = chart.size();
+    let mut rgb = vec![255u8; (width * height * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
     chart
         .draw(root)
         .map_err(|e| Error::format(png, format!("drawing the chart: {e}")))?;
-    write_png_atomic(png, &rgb, WIDTH, HEIGHT)?;
+    write_png_atomic(png, &rgb, width, height)?;
     let mut text = String::new();
-    let root = SVGBackend::with_string(&mut text, (WIDTH, HEIGHT)).into_drawing_area();
+    let root = SVGBackend::with_string(&mut text, (width, height)).into_drawing_area();
     chart
         .draw(root)
         .map_err(|e| Error::format(svg, format!("drawing the chart: {e}")))?;
@@ -113,8 +119,23 @@ where
 {
     register_font()?;
     root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(root)
-        .caption(axes.title, ("sans-serif", 24))
+    framed(root, axes, x, y, 24)
+}
+
+/// A log-log frame on `area` (not cleared), its caption `caption_size`
+/// points high.
+fn framed<'a, DB: DrawingBackend + 'a>(
+    area: &'a DrawingArea<DB, Shift>,
+    axes: Axes,
+    x: (f64, f64),
+    y: (f64, f64),
+    caption_size: u32,
+) -> std::result::Result<ChartContext<'a, DB, LogLog>, Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let mut chart = ChartBuilder::on(area)
+        .caption(axes.title, ("sans-serif", caption_size))
         .margin(16)
         .x_label_area_size(48)
         .y_label_area_size(72)
@@ -207,6 +228,9 @@ pub struct Curve {
     pub points: Vec<CurvePoint>,
     /// The line to beat (the ray tracer): drawn black and dashed.
     pub baseline: bool,
+    /// The family's colour (an index into plotters' 99-colour palette),
+    /// the same on every chart of a report.
+    pub colour: usize,
 }
 
 impl Curve {
@@ -258,76 +282,196 @@ impl Chart for Pareto<'_> {
     where
         DB::ErrorType: 'static,
     {
-        let (curves, noise_percent) = (self.curves, self.noise_percent);
-        let all = || curves.iter().flat_map(|c| c.points.iter());
-        let xy = |p: &CurvePoint| (p.error_percent.max(1e-3), p.ms.max(1e-3));
-        let (x_min, x_max) = bounds(all().map(|p| xy(p).0).chain(noise_percent));
-        let (y_min, y_max) =
-            bounds(all().flat_map(|p| [p.ms_range.0, p.ms_range.1].map(|t| t.max(1e-3))));
-        // Headroom above the slowest point for the legend.
-        let y_max = y_max * 8.0;
-        let mut chart = log_log(&root, self.axes, (x_min, x_max), (y_min, y_max))?;
-        if let Some(noise) = noise_percent.filter(|n| *n > x_min) {
-            chart
-                .draw_series(std::iter::once(Rectangle::new(
-                    [(x_min, y_min), (noise, y_max)],
-                    BLACK.mix(0.08).filled(),
-                )))?
-                .label("reference noise: errors below cannot be told apart")
-                .legend(|(x, y)| {
-                    Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], BLACK.mix(0.15).filled())
-                });
+        let (x, y) = curve_ranges(self.curves.iter(), self.noise_percent);
+        let mut chart = log_log(&root, self.axes, x, y)?;
+        plot_curves(&mut chart, self.curves, self.noise_percent, x, y)?;
+        draw_legend(&mut chart)?;
+        root.present()?;
+        Ok(())
+    }
+}
+
+/// The log ranges holding every point of `curves` (with their time bars)
+/// and the noise band, with headroom above for the legend.
+fn curve_ranges<'a>(
+    curves: impl Iterator<Item = &'a Curve> + Clone,
+    noise_percent: Option<f64>,
+) -> ((f64, f64), (f64, f64)) {
+    let all = || curves.clone().flat_map(|c| c.points.iter());
+    let x = bounds(
+        all()
+            .map(|p| p.error_percent.max(1e-3))
+            .chain(noise_percent),
+    );
+    let (y_min, y_max) =
+        bounds(all().flat_map(|p| [p.ms_range.0, p.ms_range.1].map(|t| t.max(1e-3))));
+    // Headroom above the slowest point for the legend.
+    (x, (y_min, y_max * 8.0))
+}
+
+/// `curves` on `chart` over the ranges `x` and `y`: the noise band, each
+/// family's line, time bars, points (filled on its frontier) and labels.
+fn plot_curves<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, LogLog>,
+    curves: &[Curve],
+    noise_percent: Option<f64>,
+    (x_min, _): (f64, f64),
+    (y_min, y_max): (f64, f64),
+) -> Drawn
+where
+    DB::ErrorType: 'static,
+{
+    let xy = |p: &CurvePoint| (p.error_percent.max(1e-3), p.ms.max(1e-3));
+    if let Some(noise) = noise_percent.filter(|n| *n > x_min) {
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x_min, y_min), (noise, y_max)],
+                BLACK.mix(0.08).filled(),
+            )))?
+            .label("reference noise: errors below cannot be told apart")
+            .legend(|(x, y)| {
+                Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], BLACK.mix(0.15).filled())
+            });
+    }
+    for curve in curves {
+        let color = if curve.baseline {
+            BLACK.to_rgba()
+        } else {
+            Palette99::pick(curve.colour).to_rgba()
+        };
+        let points: Vec<(f64, f64)> = curve.points.iter().map(xy).collect();
+        let mut sorted = points.clone();
+        sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let line = if curve.baseline {
+            chart.draw_series(DashedLineSeries::new(sorted, 8, 5, color.stroke_width(2)))?
+        } else {
+            chart.draw_series(LineSeries::new(sorted, color.stroke_width(2)))?
+        };
+        line.label(curve.family.clone()).legend(move |(x, y)| {
+            PathElement::new(vec![(x - 10, y), (x + 10, y)], color.stroke_width(2))
+        });
+        // Each setting's spread of time: a bar from its fastest to its
+        // slowest sample.
+        chart.draw_series(
+            curve
+                .points
+                .iter()
+                .filter(|p| p.ms_range.1 > p.ms_range.0)
+                .map(|p| {
+                    let x = xy(p).0;
+                    let (lo, hi) = (p.ms_range.0.max(1e-3), p.ms_range.1.max(1e-3));
+                    PathElement::new(vec![(x, lo), (x, hi)], color.stroke_width(1))
+                }),
+        )?;
+        let frontier = curve.frontier();
+        chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
+            let style = if best {
+                color.filled()
+            } else {
+                color.stroke_width(2)
+            };
+            Circle::new(p, 6, style)
+        }))?;
+        chart.draw_series(curve.points.iter().zip(&points).map(|(p, &(x, y))| {
+            Text::new(
+                p.label.clone(),
+                (x * 1.05, y * 1.05),
+                ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
+            )
+        }))?;
+    }
+    Ok(())
+}
+
+/// One scene of [`small_multiples`]: its title, curves and reference noise.
+#[derive(Clone, Debug)]
+pub struct Panel {
+    pub title: String,
+    pub curves: Vec<Curve>,
+    pub noise_percent: Option<f64>,
+}
+
+/// Panels a row of [`small_multiples`] holds.
+const PANELS_PER_ROW: usize = 3;
+const PANEL_WIDTH: u32 = 540;
+const PANEL_HEIGHT: u32 = 400;
+/// The title and the legend above the grid.
+const HEADER_HEIGHT: u32 = 80;
+
+/// One small chart per scene on a grid, every one over the same ranges
+/// (so that positions compare across scenes), each family in the same
+/// colour everywhere with its frontier filled, the legend once above the
+/// grid. Written as PNG to `png` and SVG to `svg`, atomically.
+pub fn small_multiples(panels: &[Panel], axes: Axes, png: &Path, svg: &Path) -> Result<()> {
+    write_chart(&Grid { panels, axes }, png, svg)
+}
+
+struct Grid<'a> {
+    panels: &'a [Panel],
+    axes: Axes<'a>,
+}
+
+impl Chart for Grid<'_> {
+    fn size(&self) -> (u32, u32) {
+        let rows = self.panels.len().div_ceil(PANELS_PER_ROW).max(1) as u32;
+        (
+            PANEL_WIDTH * PANELS_PER_ROW as u32,
+            HEADER_HEIGHT + rows * PANEL_HEIGHT,
+        )
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Drawn
+    where
+        DB::ErrorType: 'static,
+    {
+        register_font()?;
+        root.fill(&WHITE)?;
+        let noise = self
+            .panels
+            .iter()
+            .filter_map(|p| p.noise_percent)
+            .reduce(f64::max);
+        let (x, y) = curve_ranges(self.panels.iter().flat_map(|p| p.curves.iter()), noise);
+        let (header, grid) = root.split_vertically(HEADER_HEIGHT);
+        header.draw(&Text::new(
+            self.axes.title.to_string(),
+            (16, 8),
+            ("sans-serif", 24).into_font(),
+        ))?;
+        // The legend: every family once, in its colour.
+        let mut families: Vec<&Curve> = Vec::new();
+        for curve in self.panels.iter().flat_map(|p| p.curves.iter()) {
+            if !families.iter().any(|f| f.family == curve.family) {
+                families.push(curve);
+            }
         }
-        let mut colour = 0;
-        for curve in curves {
+        for (i, curve) in families.iter().enumerate() {
+            let (left, top) = (16 + 230 * i as i32, 50);
             let color = if curve.baseline {
                 BLACK.to_rgba()
             } else {
-                colour += 1;
-                Palette99::pick(colour - 1).to_rgba()
+                Palette99::pick(curve.colour).to_rgba()
             };
-            let points: Vec<(f64, f64)> = curve.points.iter().map(xy).collect();
-            let mut sorted = points.clone();
-            sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
-            let line = if curve.baseline {
-                chart.draw_series(DashedLineSeries::new(sorted, 8, 5, color.stroke_width(2)))?
-            } else {
-                chart.draw_series(LineSeries::new(sorted, color.stroke_width(2)))?
-            };
-            line.label(curve.family.clone()).legend(move |(x, y)| {
-                PathElement::new(vec![(x - 10, y), (x + 10, y)], color.stroke_width(2))
-            });
-            // Each setting's spread of time: a bar from its fastest to its
-            // slowest sample.
-            chart.draw_series(
-                curve
-                    .points
-                    .iter()
-                    .filter(|p| p.ms_range.1 > p.ms_range.0)
-                    .map(|p| {
-                        let x = xy(p).0;
-                        let (lo, hi) = (p.ms_range.0.max(1e-3), p.ms_range.1.max(1e-3));
-                        PathElement::new(vec![(x, lo), (x, hi)], color.stroke_width(1))
-                    }),
-            )?;
-            let frontier = curve.frontier();
-            chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
-                let style = if best {
-                    color.filled()
-                } else {
-                    color.stroke_width(2)
-                };
-                Circle::new(p, 6, style)
-            }))?;
-            chart.draw_series(curve.points.iter().zip(&points).map(|(p, &(x, y))| {
-                Text::new(
-                    p.label.clone(),
-                    (x * 1.05, y * 1.05),
-                    ("sans-serif", 12).into_font().color(&BLACK.mix(0.7)),
-                )
-            }))?;
+            header.draw(&PathElement::new(
+                vec![(left, top + 8), (left + 24, top + 8)],
+                color.stroke_width(3),
+            ))?;
+            header.draw(&Text::new(
+                curve.family.clone(),
+                (left + 32, top),
+                ("sans-serif", 16).into_font(),
+            ))?;
         }
-        draw_legend(&mut chart)?;
+        let rows = self.panels.len().div_ceil(PANELS_PER_ROW).max(1);
+        let cells = grid.split_evenly((rows, PANELS_PER_ROW));
+        for (panel, cell) in self.panels.iter().zip(&cells) {
+            let axes = Axes {
+                title: &panel.title,
+                ..self.axes
+            };
+            let mut chart = framed(cell, axes, x, y, 18)?;
+            plot_curves(&mut chart, &panel.curves, panel.noise_percent, x, y)?;
+        }
         root.present()?;
         Ok(())
     }
@@ -376,6 +520,7 @@ mod tests {
                 CurvePoint::exact("e", 5.0, 2.0), // ties b: neither beats the other
             ],
             baseline: false,
+            colour: 0,
         };
         assert_eq!(curve.frontier(), vec![true, true, false, true, true]);
     }
@@ -395,11 +540,13 @@ mod tests {
                     },
                 ],
                 baseline: true,
+                colour: 0,
             },
             Curve {
                 family: "hemi-raster".into(),
                 points: vec![CurvePoint::exact("pvs", 3.0, 0.5)],
                 baseline: false,
+                colour: 0,
             },
         ];
         pareto(&curves, Some(0.5), Axes::RADIANCE, &png, &svg).unwrap();
@@ -434,5 +581,39 @@ mod tests {
         assert!(img.to_rgb8().pixels().any(|p| p.0 != [255, 255, 255]));
         let text = std::fs::read_to_string(&svg).unwrap();
         assert!(text.starts_with("<svg") && text.contains("raytrace-64"));
+    }
+
+    #[test]
+    fn small_multiples_hold_every_panel_on_one_canvas() {
+        let dir = tempfile::tempdir().unwrap();
+        let (png, svg) = (dir.path().join("g.png"), dir.path().join("g.svg"));
+        let curve = |family: &str, colour, scale: f64| Curve {
+            family: family.into(),
+            points: vec![
+                CurvePoint::exact("a", 10.0 * scale, 1.0),
+                CurvePoint::exact("b", 2.0 * scale, 8.0),
+            ],
+            baseline: family == "raytrace",
+            colour,
+        };
+        let panels: Vec<Panel> = (0..4)
+            .map(|i| Panel {
+                title: format!("scene {i}"),
+                curves: vec![
+                    curve("raytrace", 0, 1.0),
+                    curve("hemi-raster", 1, 0.5 + i as f64),
+                ],
+                noise_percent: Some(0.5),
+            })
+            .collect();
+        small_multiples(&panels, Axes::RADIANCE, &png, &svg).unwrap();
+        let img = image::open(&png).unwrap();
+        // Two rows of three panels under the header.
+        assert_eq!(
+            (img.width(), img.height()),
+            (3 * PANEL_WIDTH, HEADER_HEIGHT + 2 * PANEL_HEIGHT)
+        );
+        let text = std::fs::read_to_string(&svg).unwrap();
+        assert!(text.contains("scene 3") && text.contains("hemi-raster"));
     }
 }

@@ -405,11 +405,7 @@ fn image_scores_agree_with_the_written_images() {
         markdown.contains("image error") && markdown.contains("40×30"),
         "{markdown}"
     );
-    for chart in [
-        "speed-vs-error-image.png",
-        "wall-image.png",
-        "wall-image.svg",
-    ] {
+    for chart in ["scenes-image.png", "wall-image.png", "wall-image.svg"] {
         assert!(report.join("charts").join(chart).is_file(), "{chart}");
     }
 }

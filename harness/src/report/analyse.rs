@@ -49,7 +49,8 @@ impl Report {
     pub(super) fn curves(&self, scene: &str, domain: Domain) -> Vec<Curve> {
         self.families
             .iter()
-            .filter_map(|f| {
+            .enumerate()
+            .filter_map(|(colour, f)| {
                 let mut points: Vec<CurvePoint> = self
                     .runs_of(scene)
                     .filter(|r| r.family == f.family)
@@ -68,6 +69,7 @@ impl Report {
                     family: f.family.to_string(),
                     points,
                     baseline: f.family == RAY_TRACER,
+                    colour,
                 })
             })
             .collect()

@@ -79,26 +79,36 @@ impl Domain {
 }
 
 /// The run `budget` picks among `runs`: the fastest meeting an error
-/// budget (ties: the more accurate, then the name), the most accurate
-/// within a time budget (ties: the faster, then the name).
+/// budget (ties: the more accurate, then the name); within a time budget,
+/// the fastest of the settings whose error is within `noise` (the
+/// reference's, in percent: closer errors cannot be told apart) of the
+/// lowest (ties: the more accurate, then the name).
 fn pick<'a>(
     runs: impl Iterator<Item = (&'a ReportRun, Score)>,
     budget: Budget,
+    noise: f64,
 ) -> Option<(&'a ReportRun, Score)> {
-    let key = |(run, s): &(&ReportRun, Score)| match budget {
-        Budget::Error { .. } => (s.ms, s.error_percent, run.setting.clone()),
-        Budget::Time { .. } => (s.error_percent, s.ms, run.setting.clone()),
-    };
-    runs.filter(|(_, s)| match budget {
-        Budget::Error { percent } => s.error_percent <= percent,
-        Budget::Time { ms } => s.ms <= ms,
-    })
-    .min_by(|a, b| {
-        let (a, b) = (key(a), key(b));
-        a.0.total_cmp(&b.0)
-            .then(a.1.total_cmp(&b.1))
-            .then_with(|| a.2.cmp(&b.2))
-    })
+    let meeting: Vec<(&ReportRun, Score)> = runs
+        .filter(|(_, s)| match budget {
+            Budget::Error { percent } => s.error_percent <= percent,
+            Budget::Time { ms } => s.ms <= ms,
+        })
+        .collect();
+    let lowest = meeting
+        .iter()
+        .map(|(_, s)| s.error_percent)
+        .min_by(f64::total_cmp)?;
+    meeting
+        .into_iter()
+        .filter(|(_, s)| match budget {
+            Budget::Error { .. } => true,
+            Budget::Time { .. } => s.error_percent <= lowest + noise,
+        })
+        .min_by(|(ra, a), (rb, b)| {
+            a.ms.total_cmp(&b.ms)
+                .then(a.error_percent.total_cmp(&b.error_percent))
+                .then_with(|| ra.setting.cmp(&rb.setting))
+        })
 }
 
 impl Report {
@@ -112,6 +122,16 @@ impl Report {
             .filter_map(move |r| Some((r, domain.score(r)?)))
     }
 
+    /// The relative noise of `scene`'s reference in `domain`, in percent.
+    fn noise_percent(&self, scene: &str, domain: Domain) -> f64 {
+        let reference = self.references.iter().find(|r| r.scene == scene);
+        let noise = match domain {
+            Domain::Vertex => reference.map(|r| r.noise),
+            Domain::Image => reference.and_then(|r| r.image.as_ref()).map(|i| i.noise),
+        };
+        f64::from(noise.unwrap_or(0.0)) * 100.0
+    }
+
     /// Every scene × domain × budget, in that order; a domain no run of the
     /// scene was scored in is left out.
     pub fn recommendations(&self) -> Vec<Recommendation> {
@@ -122,7 +142,8 @@ impl Report {
                     continue;
                 }
                 for budget in Budget::all() {
-                    let picked = pick(self.scored(scene, domain), budget);
+                    let noise = self.noise_percent(scene, domain);
+                    let picked = pick(self.scored(scene, domain), budget, noise);
                     out.push(Recommendation {
                         scene: scene.to_string(),
                         domain: domain.key(),
@@ -157,6 +178,7 @@ impl Report {
             Budget::Error {
                 percent: best * MARGIN,
             },
+            0.0,
         )
     }
 
@@ -167,23 +189,44 @@ impl Report {
         let recommendations = self.recommendations();
         let mut sentences = Vec::new();
         for sweep in &self.families {
-            let mut picked: Vec<(String, Vec<&str>)> = Vec::new();
-            for r in recommendations
-                .iter()
-                .filter(|r| r.family.as_deref() == Some(sweep.family))
-            {
-                let what = match r.budget {
-                    Budget::Error { percent } => {
-                        format!("the fastest to {percent}% {}", domain_words(r.domain))
+            // What it is picked for (the budgets of one kind and domain) →
+            // the scenes, in the order first met.
+            let mut picked: Vec<(String, Vec<String>)> = Vec::new();
+            for scene in self.scenes() {
+                for domain in ["vertex", "image"] {
+                    for by_error in [true, false] {
+                        let budgets: Vec<String> = recommendations
+                            .iter()
+                            .filter(|r| {
+                                r.scene == scene
+                                    && r.domain == domain
+                                    && r.family.as_deref() == Some(sweep.family)
+                            })
+                            .filter_map(|r| match r.budget {
+                                Budget::Error { percent } if by_error => {
+                                    Some(format!("{percent}%"))
+                                }
+                                Budget::Time { ms } if !by_error => Some(format!("{ms} ms")),
+                                _ => None,
+                            })
+                            .collect();
+                        if budgets.is_empty() {
+                            continue;
+                        }
+                        let what = if by_error {
+                            format!("the fastest {} to {}", domain_words(domain), list(&budgets))
+                        } else {
+                            format!(
+                                "the most accurate {} within {}",
+                                domain_words(domain),
+                                list(&budgets)
+                            )
+                        };
+                        match picked.iter_mut().find(|(w, _)| *w == what) {
+                            Some((_, scenes)) => scenes.push(scene.to_string()),
+                            None => picked.push((what, vec![scene.to_string()])),
+                        }
                     }
-                    Budget::Time { ms } => format!(
-                        "the most accurate {} within {ms} ms",
-                        domain_words(r.domain)
-                    ),
-                };
-                match picked.iter_mut().find(|(w, _)| *w == what) {
-                    Some((_, scenes)) => scenes.push(&r.scene),
-                    None => picked.push((what, vec![&r.scene])),
                 }
             }
             sentences.push(if picked.is_empty() {
@@ -194,7 +237,7 @@ impl Report {
             } else {
                 let parts: Vec<String> = picked
                     .iter()
-                    .map(|(what, scenes)| format!("{what} on {}", scenes.join(", ")))
+                    .map(|(what, scenes)| format!("{what} on {}", list(scenes)))
                     .collect();
                 format!("{}: {}.", sweep.family, parts.join("; "))
             });
@@ -205,21 +248,33 @@ impl Report {
                     .filter(|(r, _)| r.result.capabilities.per_pixel == per_pixel)
                     .min_by(|a, b| a.1.error_percent.total_cmp(&b.1.error_percent))
             };
-            if let (Some((pixel, p)), Some((vertex, v))) = (best(true), best(false)) {
-                let (better, ratio) = if p.error_percent <= v.error_percent {
-                    ("per-pixel", v.error_percent / p.error_percent.max(1e-9))
-                } else {
-                    ("per-vertex", p.error_percent / v.error_percent.max(1e-9))
-                };
-                sentences.push(format!(
-                    "On {scene}, per pixel: the best per-pixel method, {} ({:.2}% at {:.1} ms), \
-                     against the best per-vertex method's interpolated image, {} ({:.2}% at \
-                     {:.1} ms): {better} {ratio:.1}× lower error.",
-                    pixel.setting, p.error_percent, p.ms, vertex.setting, v.error_percent, v.ms,
-                ));
-            }
+            let (Some((pixel, p)), Some((vertex, v))) = (best(true), best(false)) else {
+                continue;
+            };
+            let noise = self.noise_percent(scene, Domain::Image);
+            let verdict = if (p.error_percent - v.error_percent).abs() <= noise {
+                "the same error within the reference's noise".to_string()
+            } else if p.error_percent < v.error_percent {
+                format!("per pixel {:.1}× lower", v.error_percent / p.error_percent)
+            } else {
+                format!("per vertex {:.1}× lower", p.error_percent / v.error_percent)
+            };
+            sentences.push(format!(
+                "On {scene}, images: the best per-pixel method, {} ({:.2}% at {:.1} ms), against \
+                 the best per-vertex method interpolated, {} ({:.2}% at {:.1} ms): {verdict}.",
+                pixel.setting, p.error_percent, p.ms, vertex.setting, v.error_percent, v.ms,
+            ));
         }
         sentences
+    }
+}
+
+/// "a", "a and b", "a, b and c".
+fn list(items: &[String]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.clone(),
+        [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
     }
 }
 

@@ -10,7 +10,7 @@ use super::analyse::Domain;
 use super::recommend::{Budget, MARGIN, Recommendation};
 use super::{Block, Document, Figure, Report, ReportRun, Table, atlas};
 use crate::{
-    chart::{self, Axes, Point},
+    chart::{self, Axes, Panel},
     io::{write_atomic, write_json_atomic},
     run::FrameResult,
     score::ErrorStats,
@@ -35,26 +35,29 @@ impl<'a> Written<'a> {
     }
 }
 
-/// The overall charts: every run of every scene.
-const OVERVIEW: [&str; 2] = ["speed-vs-error.png", "speed-vs-error-image.png"];
+/// The overall charts: every scene's curves as small multiples on shared
+/// axes, per vertex and per pixel.
+const OVERVIEW: [&str; 2] = ["scenes-vertex.png", "scenes-image.png"];
 
 impl Report {
     /// Writes every file of the report into `dir` (see the module docs).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        for scene in self.scenes() {
-            let noise = self.references.iter().find(|r| r.scene == scene);
-            for domain in [Domain::Vertex, Domain::Image] {
+        for (domain, file) in [Domain::Vertex, Domain::Image].into_iter().zip(OVERVIEW) {
+            let mut panels = Vec::new();
+            for scene in self.scenes() {
                 let curves = self.curves(scene, domain);
                 if curves.is_empty() {
                     continue;
                 }
+                let noise = self.references.iter().find(|r| r.scene == scene);
                 let noise = noise.and_then(|r| match domain {
                     Domain::Vertex => Some(f64::from(r.noise) * 100.0),
                     Domain::Image => r.image.as_ref().map(|i| f64::from(i.noise) * 100.0),
                 });
                 let stem = dir.join("charts").join(format!("{scene}-{}", domain.key()));
+                let title = format!("{scene}: {}", domain.axes().title);
                 let axes = Axes {
-                    title: &format!("{scene}: {}", domain.axes().title),
+                    title: &title,
                     ..domain.axes()
                 };
                 chart::pareto(
@@ -64,23 +67,15 @@ impl Report {
                     &stem.with_extension("png"),
                     &stem.with_extension("svg"),
                 )?;
+                panels.push(Panel {
+                    title: scene.to_string(),
+                    curves,
+                    noise_percent: noise,
+                });
             }
-        }
-        for (domain, file) in [Domain::Vertex, Domain::Image].into_iter().zip(OVERVIEW) {
-            let points: Vec<Point> = (self.runs.iter())
-                .filter_map(|r| {
-                    let (error_percent, time) = domain.point(&r.result)?;
-                    Some(Point {
-                        series: r.family.clone(),
-                        label: format!("{} {}", r.result.scene, setting_label(&r.setting)),
-                        error_percent,
-                        frame_ms: time.median() * 1e3,
-                    })
-                })
-                .collect();
-            if !points.is_empty() {
+            if !panels.is_empty() {
                 let png = dir.join("charts").join(file);
-                chart::speed_vs_error(&points, domain.axes(), &png, &png.with_extension("svg"))?;
+                chart::small_multiples(&panels, domain.axes(), &png, &png.with_extension("svg"))?;
             }
         }
         write_json_atomic(&dir.join("report.json"), &Written::new(self))?;
@@ -272,7 +267,8 @@ impl Report {
                 .filter(|f| dir.join("charts").join(f).exists())
                 .map(|f| Figure {
                     path: format!("charts/{f}"),
-                    caption: "every run of every scene".into(),
+                    caption: "every scene on the same axes, a family in one colour everywhere"
+                        .into(),
                 })
                 .collect();
             doc.push(Block::Figures(overview));

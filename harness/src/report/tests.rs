@@ -215,7 +215,10 @@ fn recommendations_pick_per_budget_and_the_page_names_them() {
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("## Recommendations") && md.contains("## Which method when"));
     assert!(md.contains("hemi-raster:pvs (4.90%, 1.0 ms)"), "{md}");
-    assert!(md.contains("hemi-raster: the fastest to 5% per vertex on bunny"));
+    assert!(
+        md.contains("hemi-raster: the fastest per vertex to 5% and 10% on bunny"),
+        "{md}"
+    );
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(
