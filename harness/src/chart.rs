@@ -234,20 +234,39 @@ pub struct Curve {
 }
 
 impl Curve {
-    /// The points no other point of the curve beats on both time and error
-    /// (the family's Pareto frontier; median times), as a mask over
-    /// `points`.
-    pub fn frontier(&self) -> Vec<bool> {
+    /// The points no other point of the curve beats (the family's Pareto
+    /// frontier), as a mask over `points`. A point beats another where it
+    /// is clearly better on one axis and not clearly worse on the other:
+    /// errors differ clearly when by more than `noise_percent` (the
+    /// reference's noise), times when one's slowest sample times
+    /// [`TIME_TIE`] is below the other's fastest. Differences below that
+    /// change between runs, and would move the frontier with them.
+    pub fn frontier(&self, noise_percent: f64) -> Vec<bool> {
         let p = &self.points;
-        let beats = |a: &CurvePoint, b: &CurvePoint| {
-            a.error_percent <= b.error_percent
-                && a.ms <= b.ms
-                && (a.error_percent < b.error_percent || a.ms < b.ms)
-        };
         (0..p.len())
-            .map(|i| !(0..p.len()).any(|j| j != i && beats(&p[j], &p[i])))
+            .map(|i| !(0..p.len()).any(|j| j != i && beats(&p[j], &p[i], noise_percent)))
             .collect()
     }
+}
+
+/// How much slower than another's slowest sample a setting's fastest must
+/// be to count as slower: back-to-back runs of the quick report on a
+/// 2-thread host moved a setting's samples by up to a fifth.
+pub const TIME_TIE: f64 = 1.25;
+
+/// Whether a setting timed over `a` (fastest, slowest) is clearly faster
+/// than one timed over `b`.
+pub fn clearly_faster(a: (f64, f64), b: (f64, f64)) -> bool {
+    a.1 * TIME_TIE < b.0
+}
+
+/// Whether `a` beats `b` (see [`Curve::frontier`]).
+fn beats(a: &CurvePoint, b: &CurvePoint, noise_percent: f64) -> bool {
+    let more_accurate = a.error_percent < b.error_percent - noise_percent;
+    let less_accurate = a.error_percent > b.error_percent + noise_percent;
+    let faster = clearly_faster(a.ms_range, b.ms_range);
+    let slower = clearly_faster(b.ms_range, a.ms_range);
+    (more_accurate && !slower) || (faster && !less_accurate)
 }
 
 /// Draws one scene's sweeps as a log-log chart of time per frame against
@@ -363,7 +382,7 @@ where
                     PathElement::new(vec![(x, lo), (x, hi)], color.stroke_width(1))
                 }),
         )?;
-        let frontier = curve.frontier();
+        let frontier = curve.frontier(noise_percent.unwrap_or(0.0));
         chart.draw_series(points.iter().zip(&frontier).map(|(&p, &best)| {
             let style = if best {
                 color.filled()
@@ -522,7 +541,13 @@ mod tests {
             baseline: false,
             colour: 0,
         };
-        assert_eq!(curve.frontier(), vec![true, true, false, true, true]);
+        assert_eq!(curve.frontier(0.0), vec![true, true, false, true, true]);
+        // Within the reference's noise, c's error ties b's, and neither is
+        // clearly faster once their ranges overlap.
+        let mut noisy = curve.clone();
+        noisy.points[2].ms_range = (1.5, 3.0);
+        assert_eq!(noisy.frontier(0.0), vec![true, true, false, true, true]);
+        assert_eq!(noisy.frontier(1.5), vec![true, true, true, true, true]);
     }
 
     #[test]

@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use super::analyse::Domain;
 use super::{Report, ReportRun};
+use crate::chart::clearly_faster;
 
 /// Error budgets: relative L2 error in percent.
 pub const ERROR_BUDGETS: [f64; 3] = [2.0, 5.0, 10.0];
@@ -19,11 +20,13 @@ pub const TIME_BUDGETS_MS: [f64; 3] = [1.0, 16.0, 100.0];
 pub const MARGIN: f64 = 1.1;
 
 /// A run's figures in one domain: mean error over frames, median time per
-/// frame.
+/// frame and the range of its samples.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Score {
     pub error_percent: f64,
     pub ms: f64,
+    pub ms_min: f64,
+    pub ms_max: f64,
 }
 
 /// What a recommendation answers.
@@ -74,15 +77,19 @@ impl Domain {
         Some(Score {
             error_percent,
             ms: time.median() * 1e3,
+            ms_min: time.min() * 1e3,
+            ms_max: time.max() * 1e3,
         })
     }
 }
 
-/// The run `budget` picks among `runs`: the fastest meeting an error
-/// budget (ties: the more accurate, then the name); within a time budget,
-/// the fastest of the settings whose error is within `noise` (the
-/// reference's, in percent: closer errors cannot be told apart) of the
-/// lowest (ties: the more accurate, then the name).
+/// The run `budget` picks among `runs`, counting as ties what a rerun
+/// could reverse: errors within `noise` (the reference's, in percent) and
+/// times neither of which is clearly faster. Meeting an error budget, the
+/// fastest: of the runs tied with the fastest, the most accurate (ties:
+/// the name). Within a time budget, the most accurate: of the runs tied
+/// with the most accurate, the fastest (ties: the name). Times tie unless
+/// one is [`clearly_faster`].
 fn pick<'a>(
     runs: impl Iterator<Item = (&'a ReportRun, Score)>,
     budget: Budget,
@@ -94,21 +101,49 @@ fn pick<'a>(
             Budget::Time { ms } => s.ms <= ms,
         })
         .collect();
+    let by_name = |a: &(&ReportRun, Score), b: &(&ReportRun, Score)| a.0.setting.cmp(&b.0.setting);
+    let fastest_of = |runs: Vec<(&'a ReportRun, Score)>| {
+        let fastest = runs
+            .iter()
+            .map(|(_, s)| *s)
+            .min_by(|a, b| a.ms.total_cmp(&b.ms))?;
+        runs.into_iter()
+            .filter(|(_, s)| {
+                !clearly_faster((fastest.ms_min, fastest.ms_max), (s.ms_min, s.ms_max))
+            })
+            .min_by(|a, b| by_name(a, b))
+    };
     let lowest = meeting
         .iter()
         .map(|(_, s)| s.error_percent)
         .min_by(f64::total_cmp)?;
-    meeting
-        .into_iter()
-        .filter(|(_, s)| match budget {
-            Budget::Error { .. } => true,
-            Budget::Time { .. } => s.error_percent <= lowest + noise,
-        })
-        .min_by(|(ra, a), (rb, b)| {
-            a.ms.total_cmp(&b.ms)
-                .then(a.error_percent.total_cmp(&b.error_percent))
-                .then_with(|| ra.setting.cmp(&rb.setting))
-        })
+    match budget {
+        Budget::Error { .. } => {
+            let fastest = meeting
+                .iter()
+                .map(|(_, s)| *s)
+                .min_by(|a, b| a.ms.total_cmp(&b.ms))?;
+            let tied: Vec<_> = meeting
+                .into_iter()
+                .filter(|(_, s)| {
+                    !clearly_faster((fastest.ms_min, fastest.ms_max), (s.ms_min, s.ms_max))
+                })
+                .collect();
+            let best = tied
+                .iter()
+                .map(|(_, s)| s.error_percent)
+                .min_by(f64::total_cmp)?;
+            tied.into_iter()
+                .filter(|(_, s)| s.error_percent <= best + noise)
+                .min_by(|a, b| by_name(a, b))
+        }
+        Budget::Time { .. } => fastest_of(
+            meeting
+                .into_iter()
+                .filter(|(_, s)| s.error_percent <= lowest + noise)
+                .collect(),
+        ),
+    }
 }
 
 impl Report {
@@ -123,7 +158,7 @@ impl Report {
     }
 
     /// The relative noise of `scene`'s reference in `domain`, in percent.
-    fn noise_percent(&self, scene: &str, domain: Domain) -> f64 {
+    pub(super) fn noise_percent(&self, scene: &str, domain: Domain) -> f64 {
         let reference = self.references.iter().find(|r| r.scene == scene);
         let noise = match domain {
             Domain::Vertex => reference.map(|r| r.noise),

@@ -169,7 +169,7 @@ impl Report {
                             .points
                             .iter()
                             .position(|p| p.label == setting_label(&run.setting))?;
-                        c.frontier()[i].then_some(domain.key())
+                        c.frontier(self.noise_percent(&r.scene, domain))[i].then_some(domain.key())
                     })
             };
             let frontier: Vec<&str> = [Domain::Vertex, Domain::Image]
