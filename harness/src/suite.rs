@@ -61,6 +61,32 @@ fn specs(names: &[&str]) -> Vec<MethodSpec> {
         .expect("the suites name valid settings")
 }
 
+/// What each family tries on a stress scene where its standard setting
+/// fails: the settings that address what the stress scenes break (SH
+/// truncation under small lights, too few directions at the horizon, too
+/// coarse maps, too few rays). The family without visibility has none.
+const REMEDIES: [(&str, &[&str]); 4] = [
+    ("hemi-raster", &["hemi-raster:direct", "hemi-raster:flat"]),
+    (
+        "occlusion-query",
+        &["occlusion-query:k=1026", "occlusion-query:map=1024"],
+    ),
+    (
+        "deferred-shadow",
+        &["deferred-shadow:q=128", "deferred-shadow:map=128"],
+    ),
+    (RAY_TRACER, &["raytrace:256"]),
+];
+
+/// The remedies of `family` ([`REMEDIES`]); none for a family it does not
+/// list.
+pub fn remedies(family: &str) -> Vec<MethodSpec> {
+    REMEDIES
+        .iter()
+        .find(|(f, _)| *f == family)
+        .map_or_else(Vec::new, |(_, names)| specs(names))
+}
+
 /// How much the report runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
 pub enum Suite {
@@ -223,6 +249,11 @@ mod tests {
         }
         for (spec, name) in Suite::strip_settings().iter().zip(STRIP_SETTINGS) {
             assert_eq!(spec.name(), name);
+        }
+        for (family, names) in REMEDIES {
+            for (spec, name) in remedies(family).iter().zip(names) {
+                assert_eq!((spec.name(), spec.family()), (*name, family));
+            }
         }
     }
 

@@ -176,6 +176,30 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
             }
         }
     }
+    // A remedy stands beside a setting of its family on its scene, which
+    // scored above 5%, and is scored itself.
+    for remedy in atlas.iter().filter(|a| !a["remedy_for"].is_null()) {
+        let failing = atlas
+            .iter()
+            .find(|a| {
+                a["scene"] == remedy["scene"]
+                    && a["setting"] == remedy["remedy_for"]
+                    && a["family"] == remedy["family"]
+            })
+            .unwrap_or_else(|| panic!("{remedy:#}: stands for nothing"));
+        let mean = |entry: &Value| {
+            let frames = entry["outcome"]["Ran"]["frames"].as_array().unwrap();
+            mean(
+                frames
+                    .iter()
+                    .map(|f| f["vertex"]["relative_l2"].as_f64().unwrap()),
+            )
+        };
+        assert!(mean(failing) > 0.05, "{failing:#}");
+        assert!(mean(remedy).is_finite());
+        let setting = remedy["setting"].as_str().unwrap();
+        assert!(md.contains(&format!("{setting} (instead of ")), "{setting}");
+    }
 
     // The figures decode, and the page embeds them all.
     let mut charts = 0;

@@ -2,7 +2,9 @@
 //! scenes ([`crate::scenes::stress`]), each built to break something, with
 //! the error percentiles, where on the surface the method fails (the error
 //! heat map of its image) and one sentence on why, from what the run
-//! measured.
+//! measured. Where a family fails ([`AtlasRun::fails`]), its best setting
+//! among the suite's remedies for it ([`crate::suite::remedies`]) runs
+//! beside the standard one: what to do instead.
 
 use serde::Serialize;
 
@@ -37,6 +39,8 @@ pub struct AtlasRun {
     pub outcome: Outcome,
     /// One sentence on how it fared and why, from the measurements.
     pub diagnosis: String,
+    /// For the best remedy of a failing setting: that setting.
+    pub remedy_for: Option<String>,
 }
 
 impl AtlasRun {
@@ -55,9 +59,72 @@ impl AtlasRun {
             setting: spec.name().to_string(),
             outcome,
             diagnosis,
+            remedy_for: None,
         }
     }
+
+    /// The best of `tried` (the lowest mean error; each the outcome of a
+    /// remedy), standing in for `failing` on its scene; `None` when none
+    /// ran.
+    pub fn best_remedy(failing: &AtlasRun, tried: Vec<(MethodSpec, Outcome)>) -> Option<AtlasRun> {
+        let names: Vec<String> = tried.iter().map(|(s, _)| s.name().to_string()).collect();
+        let (spec, run) = tried
+            .into_iter()
+            .filter_map(|(spec, outcome)| match outcome {
+                Outcome::Ran(run) if run.mean_error().is_finite() => Some((spec, run)),
+                _ => None,
+            })
+            .min_by(|a, b| a.1.mean_error().total_cmp(&b.1.mean_error()))?;
+        let standard = failing.mean_error().unwrap_or(f32::NAN);
+        let diagnosis = format!(
+            "{}: the best of {} here, {:.1}% error against {}'s {:.1}%.",
+            spec.name(),
+            names.join(", "),
+            run.mean_error() * 100.0,
+            failing.setting,
+            standard * 100.0
+        );
+        Some(AtlasRun {
+            scene: failing.scene.clone(),
+            family: failing.family.clone(),
+            setting: spec.name().to_string(),
+            outcome: Outcome::Ran(run),
+            diagnosis,
+            remedy_for: Some(failing.setting.clone()),
+        })
+    }
+
+    fn mean_error(&self) -> Option<f32> {
+        match &self.outcome {
+            Outcome::Ran(run) => Some(run.mean_error()),
+            Outcome::Refused(_) => None,
+        }
+    }
+
+    /// Whether the setting failed on its scene: non-finite radiance, or a
+    /// mean error above 5% and above [`FAILURE_FACTOR`] times its median on
+    /// the standard scenes (10% when it ran on none). A refusal is not a
+    /// failure: the capability it names is what is missing.
+    pub fn fails(&self, standard: &[ReportRun]) -> bool {
+        let Some(error) = self.mean_error() else {
+            return false;
+        };
+        let mut typical: Vec<f32> = standard
+            .iter()
+            .filter(|r| r.setting == self.setting)
+            .map(|r| r.result.mean_error())
+            .collect();
+        typical.sort_by(f32::total_cmp);
+        let limit = typical
+            .get(typical.len() / 2)
+            .map_or(0.10, |&t| (FAILURE_FACTOR * t).max(0.05));
+        !error.is_finite() || error > limit
+    }
 }
+
+/// How many times its error on the standard scenes (the median) a setting
+/// may reach on a stress scene before it counts as failing there.
+pub const FAILURE_FACTOR: f32 = 2.0;
 
 /// The sentence: how the mean error compares with the setting's median on
 /// the standard scenes, whether the error is everywhere or concentrated in
@@ -136,7 +203,9 @@ pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun
     doc.push(Block::Paragraph(
         "Each family's standard setting on scenes built to break something. Per-vertex relative \
          error percentiles (worst frame), flicker, and a sentence from the measurements; the maps \
-         show per pixel where each method fails (0.1% to 100%, logarithmic)."
+         show per pixel where each method fails (0.1% to 100%, logarithmic). Where a setting fails \
+         (above 5% and twice its median error on the standard scenes), the best of its family's \
+         remedies on that scene follows it, marked \"instead of\"."
             .into(),
     ));
     for scene in scenes {
@@ -170,8 +239,12 @@ pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun
                     let worst = |f: fn(&crate::score::ErrorStats) -> f32| {
                         r.frames.iter().map(|fr| f(&fr.vertex)).fold(0.0, f32::max)
                     };
+                    let setting = match &run.remedy_for {
+                        Some(standard) => format!("{} (instead of {standard})", run.setting),
+                        None => run.setting.clone(),
+                    };
                     table.row(vec![
-                        run.setting.clone(),
+                        setting,
                         percent(r.mean_error()),
                         percent(worst(|e| e.p50)),
                         percent(worst(|e| e.p90)),

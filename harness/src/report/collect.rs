@@ -216,25 +216,33 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         let first = report.atlas.len();
         for spec in &plan.atlas_settings {
             overall.set_message(format!("{name}: {spec}"));
-            let ran = spec.build(gpu).and_then(|mut method| {
-                let references = references.references();
-                let (scene, environment) = (&stress.scene, &stress.environment);
-                run::run(
-                    method.as_mut(),
-                    scene,
-                    environment,
-                    references,
-                    plan.repeats,
-                )
-            });
-            let outcome = match ran {
-                Ok(result) => Outcome::Ran(Box::new(result)),
-                Err(e) => Outcome::Refused(e.to_string()),
-            };
+            let outcome = run_stressed(spec, &stress, &references, plan.repeats, gpu);
             let entry = AtlasRun::new(&atlas_scene, spec, outcome, &report.runs);
             progress.say(format!("{name:<16} {}", entry.diagnosis));
             report.atlas.push(entry);
             overall.inc(1);
+        }
+        // Where a standard setting failed, the best of its family's
+        // remedies beside it.
+        let failing: Vec<usize> = (first..report.atlas.len())
+            .filter(|&i| report.atlas[i].fails(&report.runs))
+            .collect();
+        for i in failing.into_iter().rev() {
+            let remedies = crate::suite::remedies(&report.atlas[i].family);
+            overall.inc_length(remedies.len() as u64);
+            let tried: Vec<(MethodSpec, Outcome)> = remedies
+                .into_iter()
+                .map(|spec| {
+                    overall.set_message(format!("{name}: {spec} (remedy)"));
+                    let outcome = run_stressed(&spec, &stress, &references, plan.repeats, gpu);
+                    overall.inc(1);
+                    (spec, outcome)
+                })
+                .collect();
+            if let Some(best) = AtlasRun::best_remedy(&report.atlas[i], tried) {
+                progress.say(format!("{name:<16} {}", best.diagnosis));
+                report.atlas.insert(i + 1, best);
+            }
         }
         let runs: Vec<&RunResult> = report.atlas[first..]
             .iter()
@@ -251,6 +259,29 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
     overall.finish_and_clear();
     report.machine.adapter = gpu.adapter();
     Ok(report)
+}
+
+/// `spec` on a stress scene: its run, or why it could not run.
+fn run_stressed(
+    spec: &MethodSpec,
+    stress: &stress::StressScene,
+    references: &SceneReferences,
+    repeats: usize,
+    gpu: &SharedGpu,
+) -> Outcome {
+    let ran = spec.build(gpu).and_then(|mut method| {
+        run::run(
+            method.as_mut(),
+            &stress.scene,
+            &stress.environment,
+            references.references(),
+            repeats,
+        )
+    });
+    match ran {
+        Ok(result) => Outcome::Ran(Box::new(result)),
+        Err(e) => Outcome::Refused(e.to_string()),
+    }
 }
 
 /// Built-in scene `name` and its own environment.

@@ -226,3 +226,48 @@ fn recommendations_pick_per_budget_and_the_page_names_them() {
         recs.len()
     );
 }
+
+/// A stress run fails above 5% and twice its setting's median error on the
+/// standard scenes; the best remedy is the lowest error among those that
+/// ran, standing in for the failing setting.
+#[test]
+fn failing_atlas_settings_get_their_best_remedy() {
+    let report = report();
+    let atlas = |setting: &str, error: f32| {
+        let result = run("thin-sheets", "hemi-raster", setting, error, 1.0).result;
+        AtlasRun {
+            scene: "thin-sheets".into(),
+            family: "hemi-raster".into(),
+            setting: setting.into(),
+            outcome: Outcome::Ran(Box::new(result)),
+            diagnosis: String::new(),
+            remedy_for: None,
+        }
+    };
+    // hemi-raster's median on the standard scenes is 4.9%.
+    assert!(atlas("hemi-raster", 0.2).fails(&report.runs));
+    assert!(!atlas("hemi-raster", 0.08).fails(&report.runs));
+    // A setting the standard scenes never ran fails above 10%.
+    assert!(atlas("hemi-raster:direct", 0.12).fails(&report.runs));
+    assert!(!atlas("hemi-raster:direct", 0.08).fails(&report.runs));
+
+    let failing = atlas("hemi-raster", 0.2);
+    let spec = |name: &str| crate::methods::parse(name).unwrap();
+    let outcome = |error| atlas("x", error).outcome;
+    let tried = vec![
+        (spec("hemi-raster:flat"), outcome(0.12)),
+        (spec("hemi-raster:direct"), outcome(0.06)),
+        (spec("hemi-raster:pvs"), Outcome::Refused("no".into())),
+    ];
+    let best = AtlasRun::best_remedy(&failing, tried).unwrap();
+    assert_eq!(best.setting, "hemi-raster:direct");
+    assert_eq!(best.remedy_for.as_deref(), Some("hemi-raster"));
+    assert!(
+        best.diagnosis
+            .contains("6.0% error against hemi-raster's 20.0%"),
+        "{}",
+        best.diagnosis
+    );
+    let refused = vec![(spec("hemi-raster:flat"), Outcome::Refused("no".into()))];
+    assert!(AtlasRun::best_remedy(&failing, refused).is_none());
+}
