@@ -76,11 +76,18 @@ impl AtlasRun {
             })
             .min_by(|a, b| a.1.mean_error().total_cmp(&b.1.mean_error()))?;
         let standard = failing.mean_error().unwrap_or(f32::NAN);
+        let error = run.mean_error();
+        // A remedy within a twentieth of the failing error does not help.
+        let verdict = if error < 0.95 * standard {
+            "the best of"
+        } else {
+            "nothing better among"
+        };
         let diagnosis = format!(
-            "{}: the best of {} here, {:.1}% error against {}'s {:.1}%.",
+            "{}: {verdict} {} here, {:.1}% error against {}'s {:.1}%.",
             spec.name(),
             names.join(", "),
-            run.mean_error() * 100.0,
+            error * 100.0,
             failing.setting,
             standard * 100.0
         );

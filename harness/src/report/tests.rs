@@ -268,6 +268,14 @@ fn failing_atlas_settings_get_their_best_remedy() {
         "{}",
         best.diagnosis
     );
+    let no_help = vec![(spec("hemi-raster:flat"), outcome(0.195))];
+    let best = AtlasRun::best_remedy(&failing, no_help).unwrap();
+    assert!(
+        best.diagnosis
+            .contains("nothing better among hemi-raster:flat"),
+        "{}",
+        best.diagnosis
+    );
     let refused = vec![(spec("hemi-raster:flat"), Outcome::Refused("no".into()))];
     assert!(AtlasRun::best_remedy(&failing, refused).is_none());
 }
