@@ -65,7 +65,7 @@ fn specs(names: &[&str]) -> Vec<MethodSpec> {
 /// fails: the settings that address what the stress scenes break (SH
 /// truncation under small lights, too few directions at the horizon, too
 /// coarse maps, too few rays). The family without visibility has none.
-const REMEDIES: [(&str, &[&str]); 4] = [
+pub const REMEDIES: [(&str, &[&str]); 4] = [
     ("hemi-raster", &["hemi-raster:direct", "hemi-raster:flat"]),
     (
         "occlusion-query",

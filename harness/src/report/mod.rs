@@ -27,7 +27,7 @@ use crate::{
     run::RunResult,
     suite::{Suite, Sweep},
 };
-pub use atlas::{AtlasRun, AtlasScene, Outcome};
+pub use atlas::{AtlasRun, AtlasScene, FAILURE_FACTOR, Outcome};
 pub use collect::{Plan, collect};
 pub use document::{Block, Document, Figure, Table};
 pub use machine::MachineInfo;
