@@ -26,7 +26,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Vec3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use shadow_core::{
     Camera, Capabilities, Environment, FrameGeometry, Image, Mesh, PosedObject, Profile,
     ProfileValue, Result, Scene, ShadowMethod, Stage, VertexRadiance,
@@ -49,7 +49,7 @@ pub const REPEAT_BUDGET: f64 = 2.0;
 /// Wall-clock seconds of each stage: the samples of the frame's fresh
 /// updates, and of its repeated shading, rendering and (on the first frame)
 /// relighting.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageTimes {
     /// Once per run.
     pub prepare: f64,
@@ -85,7 +85,7 @@ fn per_repeat(update: &Timing, other: &Timing) -> Timing {
 }
 
 /// One frame's result.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FrameResult {
     pub frame: usize,
     /// Error over the vertices the method evaluated (`vertex.count` of
@@ -105,7 +105,7 @@ pub struct FrameResult {
 }
 
 /// A method's run over a scene's frames under one environment.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunResult {
     pub method: String,
     pub scene: String,
@@ -403,19 +403,19 @@ fn nudged(frame: &FrameGeometry) -> Result<FrameGeometry> {
 fn median_profile(profiles: &[Profile]) -> Profile {
     let mut out = Profile::default();
     for entry in profiles.iter().flat_map(|p| p.entries()) {
-        if out.get(entry.stage, entry.name).is_some() {
+        if out.get(entry.stage, &entry.name).is_some() {
             continue;
         }
         let values = profiles
             .iter()
-            .filter_map(|p| p.get(entry.stage, entry.name));
+            .filter_map(|p| p.get(entry.stage, &entry.name));
         match entry.value {
             ProfileValue::Seconds(_) => {
                 let seconds = values.filter_map(|v| match v {
                     ProfileValue::Seconds(s) => Some(s),
                     ProfileValue::Count(_) => None,
                 });
-                out.seconds(entry.stage, entry.name, median(seconds.collect()));
+                out.seconds(entry.stage, entry.name.clone(), median(seconds.collect()));
             }
             ProfileValue::Count(_) => {
                 let mut counts: Vec<u64> = values
@@ -425,7 +425,7 @@ fn median_profile(profiles: &[Profile]) -> Profile {
                     })
                     .collect();
                 counts.sort_unstable();
-                out.count(entry.stage, entry.name, counts[counts.len() / 2]);
+                out.count(entry.stage, entry.name.clone(), counts[counts.len() / 2]);
             }
         }
     }

@@ -1,14 +1,14 @@
 //! Error against the reference (DESIGN.md, "Scoring").
 
 use glam::Vec3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use shadow_core::{Error, Image, Result, VertexRadiance};
 
 use crate::reference::{ImageReference, VertexReference};
 
 /// How far a method's values are from the reference's, over a domain (all
 /// vertices of a frame, or all covered pixels).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ErrorStats {
     /// `sqrt(Σ|x − r|² / Σ|r|²)` over the domain, on linear RGB.
     pub relative_l2: f32,
@@ -104,7 +104,7 @@ pub fn image(image: &Image, reference: &ImageReference) -> Result<ErrorStats> {
 /// How much a method's per-vertex error changes from one frame to the next:
 /// what the eye sees as flicker or popping (lightsphere levels switching,
 /// visible sets changing, map aliasing), which a low mean error can hide.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Temporal {
     /// `sqrt(Σ|e_t − e_{t−1}|² / Σ|r_t|²)` with `e = x − r` per vertex, over
     /// the vertices evaluated in both frames.

@@ -12,25 +12,19 @@
 //!   directions, the paper's per-vertex occlusion queries, 256 area lights,
 //!   256 rays a vertex), which take minutes per frame on the larger scenes.
 
-use serde::{Serialize, Serializer};
+use serde::{Deserialize, Serialize};
 
 use crate::methods::{MethodSpec, Methods};
 
 /// A method family and its sweep: its settings in order of cost.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug)]
 pub struct Sweep {
     /// The family's name ([`MethodSpec::family`]), what the chart's legend
     /// calls it.
     pub family: &'static str,
     /// What varies along the sweep, for the chart's labels.
     pub parameter: &'static str,
-    #[serde(serialize_with = "names")]
     pub methods: Vec<MethodSpec>,
-}
-
-/// The specs' names.
-fn names<S: Serializer>(specs: &[MethodSpec], serializer: S) -> Result<S::Ok, S::Error> {
-    serializer.collect_seq(specs.iter().map(MethodSpec::name))
 }
 
 /// Scenes only the full suite runs (or `--scenes` names): the 35k-vertex
@@ -88,7 +82,7 @@ pub fn remedies(family: &str) -> Vec<MethodSpec> {
 }
 
 /// How much the report runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 pub enum Suite {
     Quick,
     #[default]

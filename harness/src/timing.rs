@@ -1,7 +1,7 @@
 //! Wall-clock samples of a stage and what the report says of them: the
 //! median, and the spread from the fastest to the slowest sample.
 
-use serde::{Serialize, Serializer, ser::SerializeStruct};
+use serde::{Deserialize, Deserializer, Serialize, Serializer, ser::SerializeStruct};
 
 /// Seconds of repeated runs of one stage (or of a frame's stages summed per
 /// repeat). Reports give the median with the range; a single sample is
@@ -94,6 +94,18 @@ impl Serialize for Timing {
     }
 }
 
+/// Reads back what [`Serialize`] wrote: the samples (the summary is
+/// recomputed from them).
+impl<'de> Deserialize<'de> for Timing {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Timing, D::Error> {
+        #[derive(Deserialize)]
+        struct Samples {
+            samples: Vec<f64>,
+        }
+        Samples::deserialize(deserializer).map(|s| Timing::new(s.samples))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -116,5 +128,6 @@ mod tests {
         let json = serde_json::to_value(&a).unwrap();
         assert_eq!(json["median"], 2.0);
         assert_eq!(json["samples"].as_array().unwrap().len(), 3);
+        assert_eq!(serde_json::from_value::<Timing>(json).unwrap(), a);
     }
 }

@@ -14,18 +14,17 @@ use harness::suite::Suite;
 use serde_json::Value;
 use support::harness;
 
-/// Runs the quick suite once into a temporary folder (references to looser
-/// noise than the default, so that a debug build finishes in minutes).
-fn quick_report() -> (tempfile::TempDir, PathBuf) {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("reports");
-    harness(&[
+/// Runs the quick suite into `out` with references cached under `cache`
+/// (to looser noise than the default, so that a debug build finishes in
+/// minutes), `extra` arguments added.
+fn quick(out: &Path, cache: &Path, extra: &[&str]) {
+    let mut args = vec![
         "report",
         "--quick",
         "--out-dir",
         out.to_str().unwrap(),
         "--cache",
-        dir.path().join("cache").to_str().unwrap(),
+        cache.to_str().unwrap(),
         "--target",
         "0.02",
         "--image-target",
@@ -34,8 +33,16 @@ fn quick_report() -> (tempfile::TempDir, PathBuf) {
         "64",
         "--repeats",
         "1",
-    ])
-    .unwrap();
+    ];
+    args.extend(extra);
+    harness(&args).unwrap();
+}
+
+/// Runs the quick suite once into a temporary folder.
+fn quick_report() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("reports");
+    quick(&out, &dir.path().join("cache"), &[]);
     (dir, out)
 }
 
@@ -219,6 +226,129 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
     }
 
     browser_check(&out.join("index.html"));
+}
+
+/// `report.json` without what a rerun changes: times, the method's own
+/// profile (seconds), references' compute time and cache state, the
+/// machine, the picks by time, and the remedies tried (a part tries every
+/// one that may be needed; the atlas shows the same chosen ones).
+fn timings_aside(mut json: Value) -> Value {
+    const VARY: [&str; 8] = [
+        "times",
+        "profile",
+        "seconds",
+        "cached",
+        "machine",
+        "merged_from",
+        "remedies",
+        "recommendations",
+    ];
+    fn strip(v: &mut Value) {
+        match v {
+            Value::Object(map) => {
+                map.retain(|k, _| !VARY.contains(&k.as_str()));
+                map.values_mut().for_each(strip);
+            }
+            Value::Array(items) => items.iter_mut().for_each(strip),
+            _ => {}
+        }
+    }
+    strip(&mut json);
+    json
+}
+
+/// A CSV line's fields (quoted fields may hold commas).
+fn fields(line: &str) -> Vec<String> {
+    let mut fields = vec![String::new()];
+    let mut quoted = false;
+    for c in line.chars() {
+        match c {
+            '"' => quoted = !quoted,
+            ',' if !quoted => fields.push(String::new()),
+            c => fields.last_mut().unwrap().push(c),
+        }
+    }
+    fields
+}
+
+/// The CSV without its timing columns and the frontier (which times
+/// decide).
+fn csv_timings_aside(csv: &str) -> Vec<Vec<String>> {
+    let rows: Vec<Vec<String>> = csv.lines().map(fields).collect();
+    let keep: Vec<usize> = (0..rows[0].len())
+        .filter(|&i| !["ms", "frontier"].iter().any(|t| rows[0][i].contains(t)))
+        .collect();
+    rows.iter()
+        .map(|r| keep.iter().map(|&i| r[i].clone()).collect())
+        .collect()
+}
+
+/// `--quick` as two parts and a merge gives one run's results, timings
+/// aside: the same runs in the same order with the same errors, the same
+/// references, the same atlas with the same remedies and sentences.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn two_parts_merge_into_one_runs_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let whole = dir.path().join("whole");
+    quick(&whole, &cache, &[]);
+    let parts: Vec<PathBuf> = (1..=2)
+        .map(|i| {
+            let out = dir.path().join(format!("part{i}"));
+            quick(&out, &cache, &["--shard", &format!("{i}/2")]);
+            assert!(out.join("report.json").is_file());
+            assert!(!out.join("index.html").exists(), "a part writes no page");
+            out
+        })
+        .collect();
+    let merged = dir.path().join("merged");
+    harness(&[
+        "report",
+        "--merge",
+        parts[1].to_str().unwrap(),
+        parts[0].to_str().unwrap(),
+        "--out-dir",
+        merged.to_str().unwrap(),
+    ])
+    .unwrap();
+
+    let read = |dir: &Path, file: &str| std::fs::read_to_string(dir.join(file)).unwrap();
+    let json = |dir: &Path| -> Value { serde_json::from_str(&read(dir, "report.json")).unwrap() };
+    let (one, two) = (json(&whole), json(&merged));
+    assert_eq!(two["merged_from"].as_array().unwrap().len(), 2);
+    assert!(!one["runs"].as_array().unwrap().is_empty());
+    assert_eq!(timings_aside(one), timings_aside(two));
+    assert_eq!(
+        csv_timings_aside(&read(&whole, "report.csv")),
+        csv_timings_aside(&read(&merged, "report.csv"))
+    );
+    // The atlas's tables carry no timings: the same text.
+    let atlas = |dir: &Path| {
+        let md = read(dir, "report.md");
+        let start = md.find("## Stability atlas").expect("an atlas");
+        let end = md[start..].find("## Reproducibility").unwrap() + start;
+        md[start..end].to_string()
+    };
+    assert_eq!(atlas(&whole), atlas(&merged));
+    // Every image the page shows was brought over from the parts.
+    let md = read(&merged, "report.md");
+    for path in md.split("](").skip(1).filter_map(|s| s.split(')').next()) {
+        assert!(merged.join(path).is_file(), "{path}: missing");
+    }
+    // A part given twice, or missing, is refused.
+    let refused = harness(&[
+        "report",
+        "--merge",
+        parts[0].to_str().unwrap(),
+        "--out-dir",
+        dir.path().join("refused").to_str().unwrap(),
+    ])
+    .unwrap_err();
+    assert!(refused.contains("part 2/2 missing"), "{refused}");
 }
 
 /// A run's (error in percent, median, fastest and slowest milliseconds per

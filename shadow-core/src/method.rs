@@ -42,7 +42,7 @@ impl fmt::Display for Capability {
 
 /// The set of capabilities a method has.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Capabilities {
     pub deforming_meshes: bool,
     pub rigid_motion: bool,

@@ -2,11 +2,11 @@
 //! the breakdown behind a stage's wall-clock time (render depth maps, read
 //! back, integrate), and counts that explain it (blockers per vertex).
 
-use std::fmt;
+use std::{borrow::Cow, fmt};
 
 /// The stages of [`ShadowMethod`](crate::ShadowMethod), in the order they run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 #[non_exhaustive]
 pub enum Stage {
@@ -31,17 +31,18 @@ impl fmt::Display for Stage {
 
 /// A named measurement within one stage.
 #[derive(Clone, Debug, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ProfileEntry {
     pub stage: Stage,
-    /// What the entry measures, e.g. "rasterization" or "depth maps".
-    pub name: &'static str,
+    /// What the entry measures, e.g. "rasterization" or "depth maps":
+    /// a method's own constant, or a name read back from a saved report.
+    pub name: Cow<'static, str>,
     pub value: ProfileValue,
 }
 
 /// Seconds of wall clock, or a count.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 pub enum ProfileValue {
     Seconds(f64),
@@ -62,7 +63,7 @@ impl fmt::Display for ProfileValue {
 /// itself starts with [`Profile::begin`] (dropping what its previous call
 /// recorded) and adds entries with [`Profile::seconds`] and [`Profile::count`].
 #[derive(Clone, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Profile {
     entries: Vec<ProfileEntry>,
 }
@@ -74,16 +75,17 @@ impl Profile {
     }
 
     /// Records that part `name` of `stage` took `seconds`.
-    pub fn seconds(&mut self, stage: Stage, name: &'static str, seconds: f64) {
+    pub fn seconds(&mut self, stage: Stage, name: impl Into<Cow<'static, str>>, seconds: f64) {
         self.set(stage, name, ProfileValue::Seconds(seconds));
     }
 
     /// Records a count within `stage`.
-    pub fn count(&mut self, stage: Stage, name: &'static str, count: u64) {
+    pub fn count(&mut self, stage: Stage, name: impl Into<Cow<'static, str>>, count: u64) {
         self.set(stage, name, ProfileValue::Count(count));
     }
 
-    fn set(&mut self, stage: Stage, name: &'static str, value: ProfileValue) {
+    fn set(&mut self, stage: Stage, name: impl Into<Cow<'static, str>>, value: ProfileValue) {
+        let name = name.into();
         match self
             .entries
             .iter_mut()

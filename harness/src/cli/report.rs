@@ -1,7 +1,7 @@
 //! `harness report`: every family's sweep on every scene of a suite, and
 //! the stability atlas, written as one report.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use clap::Args;
@@ -10,7 +10,7 @@ use super::args::ScoringArgs;
 use crate::{
     methods::{Methods, SharedGpu},
     progress::Progress,
-    report::{self, Plan},
+    report::{self, Part, Plan, Report},
     scenes::{self, SCENES, stress::STRESS_SCENES},
     suite::{Suite, Sweep},
 };
@@ -38,6 +38,20 @@ pub struct ReportArgs {
     /// not have gets a sweep of its own and its first setting in the atlas.
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
+    /// Run only part I of N disjoint parts of the plan (its scenes dealt
+    /// round-robin), writing that part's report.json and images into
+    /// --out-dir; `--merge` builds the report from the N folders.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Part>,
+    /// Build the report from the folders of parts written with --shard
+    /// (every part of one plan, once), instead of running anything.
+    #[arg(
+        long,
+        value_name = "DIR",
+        num_args = 1..,
+        conflicts_with_all = ["shard", "suite", "quick", "full", "scenes", "methods"]
+    )]
+    merge: Vec<PathBuf>,
     /// The folder to write index.html, report.md, report.json, report.csv,
     /// charts/ and the strip's and atlas's images into.
     #[arg(long, default_value = "reports")]
@@ -47,6 +61,9 @@ pub struct ReportArgs {
 }
 
 pub fn report(args: ReportArgs, methods: &Methods, progress: &Progress) -> Result<()> {
+    if !args.merge.is_empty() {
+        return merge(&args.merge, &args.out_dir);
+    }
     let suite = match (args.quick, args.full) {
         (true, _) => Suite::Quick,
         (_, true) => Suite::Full,
@@ -54,16 +71,52 @@ pub fn report(args: ReportArgs, methods: &Methods, progress: &Progress) -> Resul
     };
     let plan = plan(&args, suite, methods)?;
     let report = report::collect(&plan, &SharedGpu::new(), progress)?;
-    report.write(&args.out_dir)?;
+    if plan.part.is_whole() {
+        report.write(&args.out_dir)?;
+        println!(
+            "wrote index.html, report.md, report.json, report.csv, the charts and the images in {}",
+            args.out_dir.display()
+        );
+    } else {
+        report.write_part(&args.out_dir)?;
+        println!(
+            "wrote part {} (report.json and the images) in {}; build the report with \
+             `harness report --merge` and every part's folder",
+            plan.part,
+            args.out_dir.display()
+        );
+    }
+    failures(&report, plan.run_count())
+}
+
+/// `report --merge`: the report from its parts' folders.
+fn merge(dirs: &[PathBuf], out_dir: &Path) -> Result<()> {
+    let parts = dirs
+        .iter()
+        .map(|dir| Ok((dir.display().to_string(), Report::read(dir)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let report = report::merge(parts)?;
+    for dir in dirs {
+        report::copy_images(dir, out_dir)?;
+    }
+    report.write(out_dir)?;
     println!(
-        "wrote index.html, report.md, report.json, report.csv, the charts and the images in {}",
-        args.out_dir.display()
+        "merged {} parts: wrote index.html, report.md, report.json, report.csv, the charts and \
+         the images in {}",
+        dirs.len(),
+        out_dir.display()
     );
+    let runs = report.runs.len() + report.atlas.len() + report.failed.len();
+    failures(&report, runs)
+}
+
+/// Fails, after the report is written, when any of its `runs` failed.
+fn failures(report: &Report, runs: usize) -> Result<()> {
     if !report.failed.is_empty() {
         bail!(
             "{} of {} runs failed (listed in the report): {}",
             report.failed.len(),
-            plan.run_count(),
+            runs,
             report
                 .failed
                 .iter()
@@ -125,5 +178,6 @@ fn plan(args: &ReportArgs, suite: Suite, methods: &Methods) -> Result<Plan> {
         cache: args.scoring.estimator.cache.clone(),
         images: args.scoring.image.images_dir.clone(),
         out_dir: args.out_dir.clone(),
+        part: args.shard.unwrap_or(Part::WHOLE),
     })
 }

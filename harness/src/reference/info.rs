@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use shadow_core::{Camera, Environment, Result, Scene};
 
 use super::{
@@ -13,7 +13,7 @@ use super::{
 use crate::progress::Progress;
 
 /// A scene's references: how they were made and how noisy they are.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReferenceInfo {
     pub scene: String,
     pub environment: String,
@@ -30,7 +30,7 @@ pub struct ReferenceInfo {
 }
 
 /// A scene's per-pixel reference.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ImageReferenceInfo {
     pub width: u32,
     pub height: u32,

@@ -6,14 +6,14 @@
 //! among the suite's remedies for it ([`crate::suite::remedies`]) runs
 //! beside the standard one: what to do instead.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::{Block, Document, Figure, ReportRun, Table};
 use crate::run::RunResult;
 use crate::{methods::MethodSpec, reference::ReferenceInfo};
 
 /// A stress scene of the atlas and its reference.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct AtlasScene {
     pub name: String,
     /// What the scene is built to break.
@@ -22,7 +22,7 @@ pub struct AtlasScene {
 }
 
 /// What a method did on a stress scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub enum Outcome {
     Ran(Box<RunResult>),
     /// The method refused the scene; the message names the capability or
@@ -31,7 +31,7 @@ pub enum Outcome {
 }
 
 /// One method on one stress scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct AtlasRun {
     pub scene: String,
     pub family: String,
@@ -44,39 +44,41 @@ pub struct AtlasRun {
 }
 
 impl AtlasRun {
-    /// Scores `outcome` against the scene's reference and the same
-    /// setting's runs on the standard scenes.
-    pub fn new(
-        scene: &AtlasScene,
-        spec: &MethodSpec,
-        outcome: Outcome,
-        standard: &[ReportRun],
-    ) -> AtlasRun {
-        let diagnosis = diagnose(spec.name(), &outcome, standard);
+    /// `spec`'s outcome on `scene`, not yet judged ([`judge`] writes its
+    /// diagnosis).
+    pub fn new(scene: &str, spec: &MethodSpec, outcome: Outcome) -> AtlasRun {
         AtlasRun {
-            scene: scene.name.clone(),
+            scene: scene.to_string(),
             family: spec.family().to_string(),
             setting: spec.name().to_string(),
             outcome,
-            diagnosis,
+            diagnosis: String::new(),
             remedy_for: None,
         }
     }
 
-    /// The best of `tried` (the lowest mean error; each the outcome of a
-    /// remedy), standing in for `failing` on its scene; `None` when none
-    /// ran.
-    pub fn best_remedy(failing: &AtlasRun, tried: Vec<(MethodSpec, Outcome)>) -> Option<AtlasRun> {
-        let names: Vec<String> = tried.iter().map(|(s, _)| s.name().to_string()).collect();
-        let (spec, run) = tried
-            .into_iter()
-            .filter_map(|(spec, outcome)| match outcome {
-                Outcome::Ran(run) if run.mean_error().is_finite() => Some((spec, run)),
-                _ => None,
-            })
-            .min_by(|a, b| a.1.mean_error().total_cmp(&b.1.mean_error()))?;
+    /// `spec`'s outcome as a remedy tried where `failing` failed.
+    pub fn remedy(failing: &AtlasRun, spec: &MethodSpec, outcome: Outcome) -> AtlasRun {
+        AtlasRun {
+            remedy_for: Some(failing.setting.clone()),
+            ..AtlasRun::new(&failing.scene, spec, outcome)
+        }
+    }
+
+    /// The best of the remedies `tried` for `failing` on its scene (the
+    /// lowest mean error of those that ran), with its diagnosis; `None`
+    /// when none ran.
+    pub fn best_remedy(failing: &AtlasRun, tried: &[AtlasRun]) -> Option<AtlasRun> {
+        let tried: Vec<&AtlasRun> = tried
+            .iter()
+            .filter(|r| r.scene == failing.scene && r.remedy_for.as_ref() == Some(&failing.setting))
+            .collect();
+        let names: Vec<&str> = tried.iter().map(|r| r.setting.as_str()).collect();
+        let (best, error) = tried
+            .iter()
+            .filter_map(|r| Some((r, r.mean_error().filter(|e| e.is_finite())?)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))?;
         let standard = failing.mean_error().unwrap_or(f32::NAN);
-        let error = run.mean_error();
         // A remedy within a twentieth of the failing error does not help.
         let verdict = if error < 0.95 * standard {
             "the best of"
@@ -85,19 +87,15 @@ impl AtlasRun {
         };
         let diagnosis = format!(
             "{}: {verdict} {} here, {:.1}% error against {}'s {:.1}%.",
-            spec.name(),
+            best.setting,
             names.join(", "),
             error * 100.0,
             failing.setting,
             standard * 100.0
         );
         Some(AtlasRun {
-            scene: failing.scene.clone(),
-            family: failing.family.clone(),
-            setting: spec.name().to_string(),
-            outcome: Outcome::Ran(run),
             diagnosis,
-            remedy_for: Some(failing.setting.clone()),
+            ..(*best).clone()
         })
     }
 
@@ -109,9 +107,10 @@ impl AtlasRun {
     }
 
     /// Whether the setting failed on its scene: non-finite radiance, or a
-    /// mean error above 5% and above [`FAILURE_FACTOR`] times its median on
-    /// the standard scenes (10% when it ran on none). A refusal is not a
-    /// failure: the capability it names is what is missing.
+    /// mean error above [`FAILURE_FLOOR`] and above [`FAILURE_FACTOR`] times
+    /// its median on the standard scenes (10% when it ran on none). A
+    /// refusal is not a failure: the capability it names is what is
+    /// missing.
     pub fn fails(&self, standard: &[ReportRun]) -> bool {
         let Some(error) = self.mean_error() else {
             return false;
@@ -124,14 +123,47 @@ impl AtlasRun {
         typical.sort_by(f32::total_cmp);
         let limit = typical
             .get(typical.len() / 2)
-            .map_or(0.10, |&t| (FAILURE_FACTOR * t).max(0.05));
+            .map_or(0.10, |&t| (FAILURE_FACTOR * t).max(FAILURE_FLOOR));
         !error.is_finite() || error > limit
     }
+
+    /// Whether [`AtlasRun::fails`] may hold once the standard scenes are
+    /// known: non-finite radiance or a mean error above [`FAILURE_FLOOR`].
+    /// A part of a sharded report runs the remedies of every such setting.
+    pub fn may_fail(&self) -> bool {
+        self.mean_error()
+            .is_some_and(|e| !e.is_finite() || e > FAILURE_FLOOR)
+    }
+}
+
+/// The atlas as the report shows it: each standard setting's run of
+/// `atlas` (remedies there are dropped) with its diagnosis against
+/// `standard`, and after each that fails the best of its remedies among
+/// `tried`. Depends on nothing else, so a report merged from parts judges
+/// as one run does.
+pub fn judge(atlas: &[AtlasRun], tried: &[AtlasRun], standard: &[ReportRun]) -> Vec<AtlasRun> {
+    let mut judged = Vec::new();
+    for run in atlas.iter().filter(|r| r.remedy_for.is_none()) {
+        let run = AtlasRun {
+            diagnosis: diagnose(&run.setting, &run.outcome, standard),
+            ..run.clone()
+        };
+        let remedy = run
+            .fails(standard)
+            .then(|| AtlasRun::best_remedy(&run, tried))
+            .flatten();
+        judged.push(run);
+        judged.extend(remedy);
+    }
+    judged
 }
 
 /// How many times its error on the standard scenes (the median) a setting
 /// may reach on a stress scene before it counts as failing there.
 pub const FAILURE_FACTOR: f32 = 2.0;
+
+/// The mean error below which no setting fails on a stress scene.
+pub const FAILURE_FLOOR: f32 = 0.05;
 
 /// The sentence: how the mean error compares with the setting's median on
 /// the standard scenes, whether the error is everywhere or concentrated in
@@ -261,7 +293,7 @@ pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun
                             .map_or("–".into(), |t| percent(t.error_change)),
                         run.diagnosis.clone(),
                     ]);
-                    if r.last_image.is_some() || r.image_size.is_some() {
+                    if r.mean_image_error().is_some() {
                         maps.push(Figure {
                             path: format!(
                                 "atlas/{}/{}-error.png",

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 
 use shadow_core::{Camera, Environment, Error, Result, Scene};
 
-use super::{AtlasRun, AtlasScene, MachineInfo, Outcome, Report, ReportRun, Settings, Skipped};
+use super::{
+    AtlasRun, AtlasScene, MachineInfo, Outcome, Part, Report, ReportRun, Settings, Skipped,
+};
 use crate::{
     images,
     methods::{MethodSpec, SharedGpu},
@@ -42,13 +44,36 @@ pub struct Plan {
     pub images: Option<PathBuf>,
     /// The report's folder: the strip's and the atlas's images go under it.
     pub out_dir: PathBuf,
+    /// Which part of the scenes to run ([`Part::WHOLE`] for all).
+    pub part: Part,
 }
 
 impl Plan {
-    /// The runs it makes.
+    /// The runs its part makes (before the atlas's remedies).
     pub fn run_count(&self) -> usize {
         let settings: usize = self.sweeps.iter().map(|s| s.methods.len()).sum();
-        self.scenes.len() * settings + self.atlas_scenes.len() * self.atlas_settings.len()
+        self.scenes().len() * settings + self.atlas_scenes().len() * self.atlas_settings.len()
+    }
+
+    /// The built-in scenes of its part.
+    pub fn scenes(&self) -> Vec<&'static str> {
+        self.scenes
+            .iter()
+            .enumerate()
+            .filter(|&(unit, _)| self.part.holds(unit))
+            .map(|(_, &s)| s)
+            .collect()
+    }
+
+    /// The stress scenes of its part (the units after the built-in scenes).
+    pub fn atlas_scenes(&self) -> Vec<&'static str> {
+        let first = self.scenes.len();
+        self.atlas_scenes
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| self.part.holds(first + i))
+            .map(|(_, &s)| s)
+            .collect()
     }
 }
 
@@ -104,15 +129,20 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             image_width: plan.image_width,
             repeats: plan.repeats,
             seed: plan.vertex.seed,
+            scenes: plan.scenes.iter().map(|s| s.to_string()).collect(),
+            atlas_scenes: plan.atlas_scenes.iter().map(|s| s.to_string()).collect(),
+            part: plan.part,
         },
         references: Vec::new(),
-        families: plan.sweeps.clone(),
+        families: plan.sweeps.iter().map(Into::into).collect(),
         runs: Vec::new(),
         skipped: Vec::new(),
         failed: Vec::new(),
         strip: None,
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
+        remedies: Vec::new(),
+        merged_from: Vec::new(),
     };
     let overall = progress.runs(plan.run_count());
     let failed = |report: &mut Report, method: &str, scene: &str, error: &Error| {
@@ -124,7 +154,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         });
     };
     let settings: usize = plan.sweeps.iter().map(|s| s.methods.len()).sum();
-    for &name in &plan.scenes {
+    for name in plan.scenes() {
         overall.set_message(format!("references of {name}"));
         let loaded = builtin(name).and_then(|(scene, environment)| {
             let references =
@@ -188,7 +218,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             report.strip = Some(name.to_string());
         }
     }
-    for &name in &plan.atlas_scenes {
+    for name in plan.atlas_scenes() {
         overall.set_message(format!("references of {name}"));
         let loaded = stress::stress_scene(name).and_then(|stress| {
             let references = SceneReferences::compute(
@@ -213,39 +243,39 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             breaks: stress.breaks.to_string(),
             reference: references.info.clone(),
         };
-        let first = report.atlas.len();
+        let first = (report.atlas.len(), report.remedies.len());
         for spec in &plan.atlas_settings {
             overall.set_message(format!("{name}: {spec}"));
             let outcome = run_stressed(spec, &stress, &references, plan.repeats, gpu);
-            let entry = AtlasRun::new(&atlas_scene, spec, outcome, &report.runs);
-            progress.say(format!("{name:<16} {}", entry.diagnosis));
-            report.atlas.push(entry);
+            report.atlas.push(AtlasRun::new(name, spec, outcome));
             overall.inc(1);
         }
-        // Where a standard setting failed, the best of its family's
-        // remedies beside it.
-        let failing: Vec<usize> = (first..report.atlas.len())
-            .filter(|&i| report.atlas[i].fails(&report.runs))
-            .collect();
-        for i in failing.into_iter().rev() {
-            let remedies = crate::suite::remedies(&report.atlas[i].family);
+        // Where a standard setting fails, its family's remedies. Whether
+        // it fails depends on every standard scene; a part, which has not
+        // run them all, tries every setting that may fail.
+        for i in first.0..report.atlas.len() {
+            let run = &report.atlas[i];
+            let fails = if plan.part.is_whole() {
+                run.fails(&report.runs)
+            } else {
+                run.may_fail()
+            };
+            if !fails {
+                continue;
+            }
+            let remedies = crate::suite::remedies(&run.family);
             overall.inc_length(remedies.len() as u64);
-            let tried: Vec<(MethodSpec, Outcome)> = remedies
-                .into_iter()
-                .map(|spec| {
-                    overall.set_message(format!("{name}: {spec} (remedy)"));
-                    let outcome = run_stressed(&spec, &stress, &references, plan.repeats, gpu);
-                    overall.inc(1);
-                    (spec, outcome)
-                })
-                .collect();
-            if let Some(best) = AtlasRun::best_remedy(&report.atlas[i], tried) {
-                progress.say(format!("{name:<16} {}", best.diagnosis));
-                report.atlas.insert(i + 1, best);
+            for spec in remedies {
+                overall.set_message(format!("{name}: {spec} (remedy)"));
+                let outcome = run_stressed(&spec, &stress, &references, plan.repeats, gpu);
+                let remedy = AtlasRun::remedy(&report.atlas[i], &spec, outcome);
+                report.remedies.push(remedy);
+                overall.inc(1);
             }
         }
-        let runs: Vec<&RunResult> = report.atlas[first..]
+        let runs: Vec<&RunResult> = report.atlas[first.0..]
             .iter()
+            .chain(&report.remedies[first.1..])
             .filter_map(|a| match &a.outcome {
                 Outcome::Ran(r) => Some(r.as_ref()),
                 Outcome::Refused(_) => None,
@@ -258,6 +288,10 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
     }
     overall.finish_and_clear();
     report.machine.adapter = gpu.adapter();
+    report.judge_atlas();
+    for run in &report.atlas {
+        progress.say(format!("{:<16} {}", run.scene, run.diagnosis));
+    }
     Ok(report)
 }
 

@@ -1,18 +1,18 @@
 //! Where the numbers were measured: the CPU, its SIMD extensions, the GPU
 //! adapter, the build.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Where and how the numbers were measured.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct MachineInfo {
     pub cpu: String,
     /// The SIMD extensions the CPU reports that the methods' code paths use.
-    pub cpu_features: Vec<&'static str>,
+    pub cpu_features: Vec<String>,
     pub threads: usize,
     /// The wgpu adapter the GPU methods ran on; `None` when no GPU method ran.
     pub adapter: Option<String>,
-    pub profile: &'static str,
+    pub profile: String,
     /// `git describe` of the source tree the binary was built from (with
     /// `-dirty` for local changes), when it was a git checkout.
     pub revision: Option<String>,
@@ -22,14 +22,15 @@ impl MachineInfo {
     pub fn detect(adapter: Option<String>) -> MachineInfo {
         MachineInfo {
             cpu: cpu_name(cpuinfo().as_deref()),
-            cpu_features: cpu_features(),
+            cpu_features: cpu_features().into_iter().map(String::from).collect(),
             threads: rayon::current_num_threads(),
             adapter,
             profile: if cfg!(debug_assertions) {
                 "debug"
             } else {
                 "release"
-            },
+            }
+            .to_string(),
             revision: revision(),
         }
     }

@@ -15,28 +15,37 @@ mod atlas;
 mod collect;
 mod document;
 mod machine;
+mod parts;
 mod recommend;
 mod render;
 #[cfg(test)]
 mod tests;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::{
     reference::ReferenceInfo,
     run::RunResult,
     suite::{Suite, Sweep},
 };
-pub use atlas::{AtlasRun, AtlasScene, FAILURE_FACTOR, Outcome};
+pub use atlas::{AtlasRun, AtlasScene, FAILURE_FACTOR, FAILURE_FLOOR, Outcome};
 pub use collect::{Plan, collect};
 pub use document::{Block, Document, Figure, Table};
 pub use machine::MachineInfo;
+pub use parts::{Part, copy_images, merge};
 pub use recommend::{Budget, ERROR_BUDGETS, MARGIN, Recommendation, Score, TIME_BUDGETS_MS};
 
 /// How the report was run: everything needed to run it again.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Settings {
     pub suite: Suite,
+    /// The plan's built-in scenes and stress scenes, in the order they run
+    /// (a part ran those [`Part::holds`]).
+    pub scenes: Vec<String>,
+    pub atlas_scenes: Vec<String>,
+    /// Which part of the plan this report holds ([`Part::WHOLE`] but for a
+    /// part written with `--shard`).
+    pub part: Part,
     /// Target relative L2 noise of the vertex and image references.
     pub target_noise: f32,
     pub image_target_noise: f32,
@@ -49,8 +58,28 @@ pub struct Settings {
     pub seed: u64,
 }
 
+/// A family's sweep as the report ran it ([`Sweep`], by name).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FamilySweep {
+    pub family: String,
+    /// What varies along the sweep.
+    pub parameter: String,
+    /// The settings' names, in order of cost.
+    pub methods: Vec<String>,
+}
+
+impl From<&Sweep> for FamilySweep {
+    fn from(sweep: &Sweep) -> FamilySweep {
+        FamilySweep {
+            family: sweep.family.to_string(),
+            parameter: sweep.parameter.to_string(),
+            methods: sweep.methods.iter().map(|m| m.name().to_string()).collect(),
+        }
+    }
+}
+
 /// One run of the report: a setting of a method family on a scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReportRun {
     pub family: String,
     /// The method name it was built from (`occlusion-query:k=66`).
@@ -60,19 +89,19 @@ pub struct ReportRun {
 }
 
 /// A method that could not run on a scene, and why.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Skipped {
     pub method: String,
     pub scene: String,
     pub why: String,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Report {
     pub machine: MachineInfo,
     pub settings: Settings,
     pub references: Vec<ReferenceInfo>,
-    pub families: Vec<Sweep>,
+    pub families: Vec<FamilySweep>,
     pub runs: Vec<ReportRun>,
     pub skipped: Vec<Skipped>,
     /// Settings (or a scene's references, `reference`) that failed, and
@@ -82,15 +111,29 @@ pub struct Report {
     /// ([`crate::suite::STRIP_SCENE`]), when its images were written (under
     /// `strip/{scene}/`).
     pub strip: Option<String>,
-    /// The stability atlas's scenes and runs (images under `atlas/{scene}/`).
+    /// The stability atlas's scenes and runs (images under `atlas/{scene}/`):
+    /// each standard setting, and after each that fails the best of its
+    /// remedies.
     pub atlas_scenes: Vec<AtlasScene>,
     pub atlas: Vec<AtlasRun>,
+    /// Every remedy that ran on a stress scene ([`AtlasRun::remedy`]).
+    pub remedies: Vec<AtlasRun>,
+    /// For a report merged from parts, the machine each part ran on, in
+    /// part order; empty for one run.
+    pub merged_from: Vec<MachineInfo>,
 }
 
 impl Report {
     /// The scenes in the order they ran.
     pub fn scenes(&self) -> Vec<&str> {
         self.references.iter().map(|r| r.scene.as_str()).collect()
+    }
+
+    /// Judges the atlas's standard settings over every standard scene's
+    /// runs ([`atlas::judge`]): their diagnoses, and the best remedy after
+    /// each that fails.
+    pub fn judge_atlas(&mut self) {
+        self.atlas = atlas::judge(&self.atlas, &self.remedies, &self.runs);
     }
 
     /// The runs of one scene.

@@ -235,7 +235,7 @@ impl Report {
                             .filter(|r| {
                                 r.scene == scene
                                     && r.domain == domain
-                                    && r.family.as_deref() == Some(sweep.family)
+                                    && r.family.as_deref() == Some(sweep.family.as_str())
                             })
                             .filter_map(|r| match r.budget {
                                 Budget::Error { percent } if by_error => {

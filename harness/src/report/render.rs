@@ -356,14 +356,56 @@ impl Report {
                 self.families
                     .iter()
                     .map(|f| {
-                        let names: Vec<&str> = f.methods.iter().map(|m| m.name()).collect();
-                        format!("{} ({}): {}", f.family, f.parameter, names.join(", "))
+                        format!("{} ({}): {}", f.family, f.parameter, f.methods.join(", "))
                     })
                     .collect::<Vec<_>>()
                     .join("; ")
             ),
         ]));
+        if !self.merged_from.is_empty() {
+            doc.push(Block::Paragraph(self.parts_note()));
+        }
         doc
+    }
+
+    /// Which machines a report merged from parts ran on, and whether its
+    /// timings compare across them.
+    fn parts_note(&self) -> String {
+        let count = self.merged_from.len();
+        let machines: Vec<String> = self
+            .merged_from
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                format!(
+                    "part {}/{count} on {}, {} threads, {}",
+                    i + 1,
+                    m.cpu,
+                    m.threads,
+                    m.adapter.as_deref().unwrap_or("no GPU adapter")
+                )
+            })
+            .collect();
+        let same = self.merged_from.iter().all(|m| {
+            let first = &self.merged_from[0];
+            (&m.cpu, &m.cpu_features, m.threads, &m.adapter)
+                == (
+                    &first.cpu,
+                    &first.cpu_features,
+                    first.threads,
+                    &first.adapter,
+                )
+        });
+        format!(
+            "Merged from {count} parts, each run with `--shard I/{count}`: {}. {}",
+            machines.join("; "),
+            if same {
+                "One kind of machine: times compare across scenes."
+            } else {
+                "The parts ran on different machines: times compare within a scene, not across \
+                 scenes of different parts."
+            }
+        )
     }
 
     /// Scenes × families: each family's fastest setting within [`MARGIN`]
@@ -373,12 +415,12 @@ impl Report {
             return None;
         }
         let mut columns = vec!["scene"];
-        columns.extend(self.families.iter().map(|f| f.family));
+        columns.extend(self.families.iter().map(|f| f.family.as_str()));
         let mut table = Table::new(&columns);
         for scene in self.scenes() {
             let mut row = vec![scene.to_string()];
             for family in &self.families {
-                let pick = |domain| self.family_pick(scene, family.family, domain);
+                let pick = |domain| self.family_pick(scene, &family.family, domain);
                 let cell = match (pick(Domain::Vertex), pick(Domain::Image)) {
                     (None, _) => "–".to_string(),
                     (Some((run, v)), image) => {
@@ -488,7 +530,7 @@ impl Report {
             .iter()
             .filter_map(|m| {
                 self.runs_of(scene)
-                    .find(|r| r.setting == m.name() && r.result.last_image.is_some())
+                    .find(|r| r.setting == m.name() && r.result.mean_image_error().is_some())
             })
             .collect();
         doc.push(Block::Heading(
