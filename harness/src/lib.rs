@@ -16,6 +16,7 @@ pub mod progress;
 pub mod reference;
 pub mod report;
 pub mod run;
+pub mod scaling;
 pub mod scenes;
 pub mod score;
 pub mod suite;

@@ -350,7 +350,7 @@ pub const MAX_BATCH: u32 = 64;
 
 /// One sample of `call`, which times its own work: calls until they have
 /// taken `seconds` in all (at least one, at most [`MAX_BATCH`]), their mean.
-fn sample(seconds: f64, mut call: impl FnMut() -> Result<Duration>) -> Result<Duration> {
+pub(crate) fn sample(seconds: f64, mut call: impl FnMut() -> Result<Duration>) -> Result<Duration> {
     let (mut total, mut calls) = (call()?, 1);
     while total.as_secs_f64() < seconds && calls < MAX_BATCH {
         total += call()?;
@@ -359,7 +359,7 @@ fn sample(seconds: f64, mut call: impl FnMut() -> Result<Duration>) -> Result<Du
     Ok(total / calls)
 }
 
-fn timed(f: impl FnOnce() -> Result<()>) -> Result<Duration> {
+pub(crate) fn timed(f: impl FnOnce() -> Result<()>) -> Result<Duration> {
     let start = Instant::now();
     f()?;
     Ok(start.elapsed())
@@ -371,7 +371,7 @@ fn timing(d: Vec<Duration>) -> Timing {
 
 /// `frame` with every object moved up by a ten-thousandth of its bounds'
 /// diagonal: a frame any method must recompute, that shades the same.
-fn nudged(frame: &FrameGeometry) -> Result<FrameGeometry> {
+pub(crate) fn nudged(frame: &FrameGeometry) -> Result<FrameGeometry> {
     let offset = Vec3::Y * (frame.bounds().diagonal() * 1e-4).max(f32::MIN_POSITIVE);
     let objects = frame
         .objects

@@ -55,6 +55,16 @@ fn specs(names: &[&str]) -> Vec<MethodSpec> {
         .expect("the suites name valid settings")
 }
 
+/// The scenes whose time per image the report measures across widths: the
+/// bunny's contact shadow (one still frame) and the skinned human (its
+/// first frame).
+pub const SCALING_SCENES: [&str; 2] = ["bunny", "human"];
+
+/// The ray tracer's per-pixel settings timed across widths beside the
+/// families' standard settings: the curve of time against error that the
+/// other methods are compared with at equal error.
+const SCALING_RAY_TRACER: [&str; 3] = ["raytrace:4", "raytrace:16", "raytrace:64"];
+
 /// What each family tries on a stress scene where its standard setting
 /// fails: the settings that address what the stress scenes break (SH
 /// truncation under small lights, too few directions at the horizon, too
@@ -117,6 +127,30 @@ impl Suite {
     /// suite ran them.
     pub fn strip_settings() -> Vec<MethodSpec> {
         specs(&STRIP_SETTINGS)
+    }
+
+    /// The image widths of the resolution study, in pixels.
+    pub fn scaling_widths(self) -> &'static [u32] {
+        match self {
+            Suite::Quick => &[160, 320, 640, 1024],
+            Suite::Default => &[160, 320, 640, 1024],
+            Suite::Full => &[160, 256, 384, 512, 768, 1024, 1536, 2048],
+        }
+    }
+
+    /// The settings the resolution study times on [`SCALING_SCENES`]: each
+    /// family's standard setting (the atlas's), and the ray tracer's
+    /// per-pixel settings of the suite's sweep.
+    pub fn scaling_settings(self) -> Vec<MethodSpec> {
+        let mut names: Vec<&str> = self.atlas_names().to_vec();
+        let sweep = self.families();
+        let traced = sweep.iter().filter(|s| s.family == RAY_TRACER);
+        for spec in traced.flat_map(|s| &s.methods) {
+            if SCALING_RAY_TRACER.contains(&spec.name()) && !names.contains(&spec.name()) {
+                names.push(spec.name());
+            }
+        }
+        specs(&names)
     }
 
     /// One setting per family that the atlas runs on every stress scene.

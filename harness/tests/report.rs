@@ -208,6 +208,51 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
         assert!(md.contains(&format!("{setting} (instead of ")), "{setting}");
     }
 
+    // Time per image across widths, on both scenes, from 160 to 1024
+    // pixels at least; the table's slope is the log-log fit of the JSON's
+    // medians.
+    let scaling = json["scaling"].as_array().unwrap();
+    for scene in harness::suite::SCALING_SCENES {
+        let runs: Vec<&Value> = scaling.iter().filter(|s| s["scene"] == scene).collect();
+        assert!(
+            runs.len() >= 4,
+            "{scene}: {} settings timed across widths",
+            runs.len()
+        );
+        for run in runs {
+            let widths = run["widths"].as_array().unwrap();
+            let (w, t): (Vec<f64>, Vec<f64>) = widths
+                .iter()
+                .map(|w| {
+                    let median = w["time"]["median"].as_f64().unwrap();
+                    (w["width"].as_f64().unwrap().ln(), median.ln())
+                })
+                .unzip();
+            assert!(
+                w[0] <= 160f64.ln() && w[w.len() - 1] >= 1024f64.ln(),
+                "{run}"
+            );
+            let n = w.len() as f64;
+            let (mw, mt) = (w.iter().sum::<f64>() / n, t.iter().sum::<f64>() / n);
+            let slope = w
+                .iter()
+                .zip(&t)
+                .map(|(a, b)| (a - mw) * (b - mt))
+                .sum::<f64>()
+                / w.iter().map(|a| (a - mw).powi(2)).sum::<f64>();
+            let setting = run["setting"].as_str().unwrap();
+            let section = &md[md.find(&format!("### Resolution: {scene}")).unwrap()..];
+            let row = section
+                .lines()
+                .find(|l| l.starts_with(&format!("| {setting} |")))
+                .unwrap_or_else(|| panic!("{setting} on {scene}: no row"));
+            assert!(
+                row.contains(&format!("| {slope:.2} |")),
+                "{row}: slope {slope:.2}"
+            );
+        }
+    }
+
     // The figures decode, and the page embeds them all.
     let mut charts = 0;
     for entry in std::fs::read_dir(out.join("charts")).unwrap() {
@@ -233,8 +278,9 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
 /// machine, the picks by time, and the remedies tried (a part tries every
 /// one that may be needed; the atlas shows the same chosen ones).
 fn timings_aside(mut json: Value) -> Value {
-    const VARY: [&str; 8] = [
+    const VARY: [&str; 9] = [
         "times",
+        "time",
         "profile",
         "seconds",
         "cached",

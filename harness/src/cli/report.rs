@@ -179,5 +179,7 @@ fn plan(args: &ReportArgs, suite: Suite, methods: &Methods) -> Result<Plan> {
         images: args.scoring.image.images_dir.clone(),
         out_dir: args.out_dir.clone(),
         part: args.shard.unwrap_or(Part::WHOLE),
+        scaling_settings: suite.scaling_settings(),
+        scaling_widths: suite.scaling_widths().to_vec(),
     })
 }

@@ -18,8 +18,9 @@ use crate::{
         VertexReference,
     },
     run::{self, References, RunResult},
+    scaling::{self, ScalingRun},
     scenes::{self, SCENES, stress},
-    suite::{STRIP_SCENE, Suite, Sweep},
+    suite::{SCALING_SCENES, STRIP_SCENE, Suite, Sweep},
 };
 
 /// What a report runs, every name already checked.
@@ -46,6 +47,10 @@ pub struct Plan {
     pub out_dir: PathBuf,
     /// Which part of the scenes to run ([`Part::WHOLE`] for all).
     pub part: Part,
+    /// The settings timed across widths on [`SCALING_SCENES`], and the
+    /// widths.
+    pub scaling_settings: Vec<MethodSpec>,
+    pub scaling_widths: Vec<u32>,
 }
 
 impl Plan {
@@ -142,6 +147,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
         remedies: Vec::new(),
+        scaling: Vec::new(),
         merged_from: Vec::new(),
     };
     let overall = progress.runs(plan.run_count());
@@ -216,6 +222,18 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         if let (true, Some(reference)) = (name == STRIP_SCENE, references.image.last()) {
             images::write_scene(&plan.out_dir.join("strip"), name, &reference.image, &runs)?;
             report.strip = Some(name.to_string());
+        }
+        if SCALING_SCENES.contains(&name) {
+            overall.inc_length(plan.scaling_settings.len() as u64);
+            for spec in &plan.scaling_settings {
+                overall.set_message(format!("{name}: {spec} across widths"));
+                match time_across_widths(spec, &scene, &environment, plan, gpu) {
+                    Ok(run) => report.scaling.push(run),
+                    Err(Error::Unsupported { .. }) => {}
+                    Err(e) => failed(&mut report, &format!("{spec} across widths"), name, &e),
+                }
+                overall.inc(1);
+            }
         }
     }
     for name in plan.atlas_scenes() {
@@ -293,6 +311,32 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         progress.say(format!("{:<16} {}", run.scene, run.diagnosis));
     }
     Ok(report)
+}
+
+/// `spec`'s time per image on `scene` at each of the plan's widths.
+fn time_across_widths(
+    spec: &MethodSpec,
+    scene: &Scene,
+    environment: &Environment,
+    plan: &Plan,
+    gpu: &SharedGpu,
+) -> Result<ScalingRun> {
+    let mut method = spec.build(gpu)?;
+    let per_pixel = method.capabilities().per_pixel;
+    let widths = scaling::time_images(
+        method.as_mut(),
+        scene,
+        environment,
+        &plan.scaling_widths,
+        scaling::samples(plan.repeats),
+    )?;
+    Ok(ScalingRun {
+        scene: scene.name().to_string(),
+        family: spec.family().to_string(),
+        setting: spec.name().to_string(),
+        per_pixel,
+        widths,
+    })
 }
 
 /// `spec` on a stress scene: its run, or why it could not run.

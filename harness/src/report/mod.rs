@@ -18,6 +18,7 @@ mod machine;
 mod parts;
 mod recommend;
 mod render;
+mod resolution;
 #[cfg(test)]
 mod tests;
 
@@ -26,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::{
     reference::ReferenceInfo,
     run::RunResult,
+    scaling::ScalingRun,
     suite::{Suite, Sweep},
 };
 pub use atlas::{AtlasRun, AtlasScene, FAILURE_FACTOR, FAILURE_FLOOR, Outcome};
@@ -34,6 +36,7 @@ pub use document::{Block, Document, Figure, Table};
 pub use machine::MachineInfo;
 pub use parts::{Part, copy_images, merge};
 pub use recommend::{Budget, ERROR_BUDGETS, MARGIN, Recommendation, Score, TIME_BUDGETS_MS};
+pub use resolution::{Overtakes, WidthComparison, equal_error_ms, overtakes};
 
 /// How the report was run: everything needed to run it again.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -118,6 +121,9 @@ pub struct Report {
     pub atlas: Vec<AtlasRun>,
     /// Every remedy that ran on a stress scene ([`AtlasRun::remedy`]).
     pub remedies: Vec<AtlasRun>,
+    /// Time per image across widths ([`crate::scaling`]) on the scenes of
+    /// [`crate::suite::SCALING_SCENES`] the report ran.
+    pub scaling: Vec<ScalingRun>,
     /// For a report merged from parts, the machine each part ran on, in
     /// part order; empty for one run.
     pub merged_from: Vec<MachineInfo>,

@@ -169,6 +169,7 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
         remedies: Vec::new(),
+        scaling: Vec::new(),
         merged_from: parts.iter().map(|r| r.machine.clone()).collect(),
     };
     if merged.machine.adapter.is_none() {
@@ -183,6 +184,7 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
         merged.atlas_scenes.extend(part.atlas_scenes);
         merged.atlas.extend(part.atlas);
         merged.remedies.extend(part.remedies);
+        merged.scaling.extend(part.scaling);
     }
     // Stable sorts: within a scene, the order its part ran in.
     merged.references.sort_by_key(|r| unit(&r.scene));
@@ -192,6 +194,7 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
     merged.atlas_scenes.sort_by_key(|s| unit(&s.name));
     merged.atlas.sort_by_key(|r| unit(&r.scene));
     merged.remedies.sort_by_key(|r| unit(&r.scene));
+    merged.scaling.sort_by_key(|r| unit(&r.scene));
     merged.judge_atlas();
     Ok(merged)
 }

@@ -78,6 +78,7 @@ impl Report {
                 chart::small_multiples(&panels, domain.axes(), &png, &png.with_extension("svg"))?;
             }
         }
+        self.write_resolution_chart(dir)?;
         write_json_atomic(&dir.join("report.json"), &Written::new(self))?;
         write_atomic(&dir.join("report.csv"), self.runs_table().csv().as_bytes())?;
         let document = self.document(dir);
@@ -318,6 +319,7 @@ impl Report {
             ));
             doc.push(Block::Bullets(profiled));
         }
+        self.resolution_blocks(&mut doc);
         if let Some(scene) = &self.strip {
             self.strip_blocks(&mut doc, scene);
         }

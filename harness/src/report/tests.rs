@@ -2,6 +2,7 @@ use shadow_core::{Capabilities, Profile};
 
 use super::*;
 use crate::reference::ImageReferenceInfo;
+use crate::report::{Overtakes, equal_error_ms, overtakes};
 use crate::run::{FrameResult, StageTimes};
 use crate::score::{ErrorStats, Temporal};
 use crate::suite::RAY_TRACER;
@@ -114,6 +115,7 @@ fn report() -> Report {
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
         remedies: Vec::new(),
+        scaling: Vec::new(),
         merged_from: Vec::new(),
     }
 }
@@ -378,4 +380,104 @@ fn parts_merge_into_the_whole_report() {
     foreign[1].1.settings.seed += 1;
     assert!(error(foreign).contains("part1 is a part of another plan than part2"));
     assert!(Report::read(dir.path()).is_err());
+}
+
+/// Equal error: log-log between the ray tracer's settings, time ∝ error⁻²
+/// beyond them.
+#[test]
+fn the_ray_tracer_at_equal_error_is_read_off_its_settings() {
+    let at = [(0.4, 10.0), (0.1, 160.0)];
+    let (ms, beyond) = equal_error_ms(&at, 0.2).unwrap();
+    approx::assert_relative_eq!(ms, 40.0, max_relative = 1e-5);
+    assert!(!beyond);
+    let (ms, beyond) = equal_error_ms(&at, 0.05).unwrap();
+    approx::assert_relative_eq!(ms, 640.0, max_relative = 1e-5);
+    assert!(beyond);
+    let (ms, _) = equal_error_ms(&at, 0.8).unwrap();
+    approx::assert_relative_eq!(ms, 2.5, max_relative = 1e-5);
+    assert_eq!(equal_error_ms(&[], 0.1), None);
+}
+
+#[test]
+fn a_setting_overtakes_from_where_it_stays_faster() {
+    assert_eq!(
+        overtakes(&[(160.0, 0.5), (1024.0, 0.1)]),
+        Overtakes::Everywhere
+    );
+    assert_eq!(overtakes(&[(160.0, 0.5), (1024.0, 1.5)]), Overtakes::Never);
+    // Behind by 2× at 160, ahead by 2× at 640: even in log-log at 320.
+    let Overtakes::From(w) = overtakes(&[(160.0, 2.0), (640.0, 0.5), (1024.0, 0.2)]) else {
+        panic!("expected a crossing");
+    };
+    approx::assert_relative_eq!(w, 320.0, max_relative = 1e-9);
+    // Ahead, behind, ahead: from the last crossing.
+    let Overtakes::From(w) = overtakes(&[(160.0, 0.5), (320.0, 1.5), (640.0, 0.5)]) else {
+        panic!("expected a crossing");
+    };
+    assert!(w > 320.0 && w < 640.0, "{w}");
+}
+
+/// A per-frame method (flat in width) against a per-pixel ray tracer
+/// (time ∝ width²): the table names where it overtakes, the sentence says
+/// so with the figures, the chart is written.
+#[test]
+fn the_resolution_section_compares_with_the_ray_tracer_at_equal_error() {
+    use crate::scaling::{ScalingRun, WidthTime};
+    let mut report = report();
+    let scaled = |family: &str, setting: &str, ms: &dyn Fn(f64) -> f64| ScalingRun {
+        scene: "bunny".into(),
+        family: family.into(),
+        setting: setting.into(),
+        per_pixel: true,
+        widths: [160u32, 320, 640, 1024]
+            .map(|w| WidthTime {
+                width: w,
+                height: w * 3 / 4,
+                time: Timing::new(vec![ms(f64::from(w)) / 1e3]),
+            })
+            .to_vec(),
+    };
+    // raytrace:4 and :16 score 30% and 15% per pixel on bunny (1.5× their
+    // vertex errors, see `run`); hemi-raster scores 7.35%, beyond them.
+    report
+        .runs
+        .retain(|r| r.setting != "raytrace:16" || r.result.scene != "bunny");
+    report
+        .runs
+        .push(run("bunny", RAY_TRACER, "raytrace:16", 0.1, 12.0));
+    report.scaling = vec![
+        scaled("hemi-raster", "hemi-raster", &|_| 40.0),
+        scaled(RAY_TRACER, "raytrace:4", &|w| (w / 160.0).powi(2)),
+        scaled(RAY_TRACER, "raytrace:16", &|w| 4.0 * (w / 160.0).powi(2)),
+    ];
+    let comparisons = report.width_comparisons("bunny");
+    assert_eq!(comparisons.len(), 1);
+    let c = &comparisons[0];
+    approx::assert_relative_eq!(c.slope, 0.0, epsilon = 1e-9);
+    // The ray tracer at 7.35%: (15 / 7.35)² × raytrace:16's time, beyond
+    // its settings.
+    let factor = (0.15f64 / 0.0735).powi(2);
+    for (w, (ms, beyond)) in [160.0f64, 320.0, 640.0, 1024.0]
+        .iter()
+        .zip(&c.ray_tracer_ms)
+    {
+        approx::assert_relative_eq!(*ms, factor * 4.0 * (w / 160.0).powi(2), max_relative = 1e-4);
+        assert!(beyond);
+    }
+    // 40 ms = factor × 4 ms × (w / 160)²
+    let crossing = 160.0 * (10.0 / factor).sqrt();
+    match c.overtakes {
+        Overtakes::From(w) => assert!((w - crossing).abs() < 0.25 * crossing, "{w} vs {crossing}"),
+        other => panic!("{other:?}"),
+    }
+    let dir = tempfile::tempdir().unwrap();
+    report.write(dir.path()).unwrap();
+    assert!(dir.path().join("charts/resolution.png").is_file());
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("### Resolution: bunny"), "{md}");
+    assert!(md.contains("| hemi-raster | 7.35% |"), "{md}");
+    assert!(
+        md.contains("On bunny, hemi-raster (7.35% per pixel) overtakes the ray tracer"),
+        "{md}"
+    );
 }

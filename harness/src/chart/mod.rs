@@ -2,7 +2,10 @@
 //! point, error against the reference across, time per frame up, both on
 //! log scales. Lower left is better. The report draws every method (a method
 //! is worth its complexity where it sits left of or below the ray tracer);
-//! the accuracy table draws every option of one method.
+//! the accuracy table draws every option of one method. The resolution
+//! chart ([`time_against_width`]) draws time per image against image width.
+
+mod scaling;
 
 use std::path::Path;
 
@@ -11,10 +14,11 @@ use plotters::prelude::*;
 use shadow_core::{Error, Result};
 
 use crate::io::{write_atomic, write_png_atomic};
+pub use scaling::{WidthLine, WidthPanel, time_against_width};
 
 /// DejaVu Sans (free licence, see assets/fonts), embedded so that charts need
 /// no system font libraries.
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+const FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
 
 const WIDTH: u32 = 1100;
 const HEIGHT: u32 = 720;
