@@ -181,8 +181,8 @@ pub fn pixel_errors(image: &Image, reference: &Image) -> Vec<Option<f32>> {
 }
 
 /// Writes the heat map of [`pixel_errors`] with its colour scale beneath:
-/// Viridis over [`ERROR_SCALE`] on a log scale (errors beyond either end
-/// take its colour), background grey; small images are magnified by a whole
+/// Viridis over [`ERROR_SCALE`] on a log scale in bands of a quarter
+/// decade (errors beyond either end take its colour), background grey; small images are magnified by a whole
 /// factor to at least 480 pixels wide. Atomic.
 pub fn write_error_map(path: &Path, image: &Image, reference: &Image) -> Result<()> {
     if (image.width, image.height) != (reference.width, reference.height) {
@@ -211,6 +211,18 @@ pub fn write_error_map(path: &Path, image: &Image, reference: &Image) -> Result<
     write_png_atomic(path, &rgb, width, height)
 }
 
+/// Colours per decade of the heat map: a band is a quarter decade (so the
+/// eye reads levels, and maps of noisy errors compress).
+const BANDS_PER_DECADE: f32 = 4.0;
+
+/// The band of scale position `t` (in [0, 1]), as the position of its
+/// colour: the first band 0, the last 1.
+fn band(t: f32) -> f32 {
+    let (lo, hi) = ERROR_SCALE;
+    let bands = ((hi / lo).log10() * BANDS_PER_DECADE).round().max(2.0);
+    (t * bands).floor().min(bands - 1.0) / (bands - 1.0)
+}
+
 /// Where `error` falls on the log scale, in [0, 1].
 fn scale_position(error: f32) -> f32 {
     let (lo, hi) = ERROR_SCALE;
@@ -236,7 +248,7 @@ fn draw_error_map(
             (i as u32 / image_width) as i32,
         );
         let colour = match error {
-            Some(e) => ViridisRGB.get_color(scale_position(*e)),
+            Some(e) => ViridisRGB.get_color(band(scale_position(*e))),
             None => RGBColor(96, 96, 96),
         };
         let corner = (x * zoom, y * zoom);
@@ -251,7 +263,7 @@ fn draw_error_map(
         let t = (x - bar_left) as f32 / (bar_right - bar_left - 1).max(1) as f32;
         legend.draw(&Rectangle::new(
             [(x, 6), (x + 1, 30)],
-            ViridisRGB.get_color(t).filled(),
+            ViridisRGB.get_color(band(t)).filled(),
         ))?;
     }
     let style = ("sans-serif", 14).into_font().color(&BLACK);

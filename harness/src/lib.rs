@@ -12,6 +12,7 @@ pub mod images;
 pub mod io;
 pub mod methods;
 pub mod npz;
+pub mod pictures;
 pub mod progress;
 pub mod reference;
 pub mod report;

@@ -142,7 +142,12 @@ impl Suite {
     /// family's standard setting (the atlas's), and the ray tracer's
     /// per-pixel settings of the suite's sweep.
     pub fn scaling_settings(self) -> Vec<MethodSpec> {
-        let mut names: Vec<&str> = self.atlas_names().to_vec();
+        let atlas = self.atlas_names();
+        let mut names: Vec<&str> = atlas
+            .iter()
+            .copied()
+            .filter(|name| !name.starts_with(RAY_TRACER))
+            .collect();
         let sweep = self.families();
         let traced = sweep.iter().filter(|s| s.family == RAY_TRACER);
         for spec in traced.flat_map(|s| &s.methods) {

@@ -10,6 +10,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use harness::chart::TIME_TIE;
+
+/// The pictures' width the quick report of these tests asks for (the
+/// default, 512, costs minutes in a debug build).
+const PICTURE_WIDTH: u32 = 128;
 use harness::suite::Suite;
 use serde_json::Value;
 use support::harness;
@@ -18,6 +22,7 @@ use support::harness;
 /// (to looser noise than the default, so that a debug build finishes in
 /// minutes), `extra` arguments added.
 fn quick(out: &Path, cache: &Path, extra: &[&str]) {
+    let picture_width = PICTURE_WIDTH.to_string();
     let mut args = vec![
         "report",
         "--quick",
@@ -33,6 +38,8 @@ fn quick(out: &Path, cache: &Path, extra: &[&str]) {
         "64",
         "--repeats",
         "1",
+        "--picture-width",
+        &picture_width,
     ];
     args.extend(extra);
     harness(&args).unwrap();
@@ -176,10 +183,6 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
                         );
                     }
                 }
-                assert!(
-                    md.contains(&format!("atlas/{scene}/")),
-                    "{scene}: no error map"
-                );
             }
         }
     }
@@ -206,7 +209,38 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
         assert!(mean(remedy).is_finite());
         let setting = remedy["setting"].as_str().unwrap();
         assert!(md.contains(&format!("{setting} (instead of ")), "{setting}");
+        // Pictures of both, each beside its error map, framed on the
+        // failure, as wide as asked.
+        let scene = remedy["scene"].as_str().unwrap();
+        let pictures = json["pictures"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["scene"] == scene)
+            .unwrap_or_else(|| panic!("{scene}: no pictures"));
+        assert_eq!(pictures["width"], PICTURE_WIDTH);
+        for shown in [remedy, failing] {
+            let picture = pictures["shown"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|p| p["setting"] == shown["setting"])
+                .unwrap_or_else(|| panic!("{scene}: no picture of {}", shown["setting"]));
+            let stem = picture["stem"].as_str().unwrap();
+            let (image, map) = (
+                format!("pictures/{scene}/{stem}.png"),
+                format!("pictures/{scene}/{stem}-error.png"),
+            );
+            let row = md
+                .lines()
+                .find(|l| l.contains(&format!("]({image})")))
+                .unwrap_or_else(|| panic!("{image}: not on the page"));
+            assert!(row.contains(&format!("]({map})")), "{row}");
+        }
     }
+    // The strip: the bunny's pictures, each beside its error map.
+    assert!(md.contains("](pictures/bunny/reference.png)"));
+    assert!(md.contains("](pictures/bunny/deferred-shadow-error.png)"));
 
     // Time per image across widths, on both scenes, from 160 to 1024
     // pixels at least; the table's slope is the log-log fit of the JSON's
@@ -275,10 +309,11 @@ fn the_quick_report_holds_every_run_and_opens_in_a_browser() {
 
 /// `report.json` without what a rerun changes: times, the method's own
 /// profile (seconds), references' compute time and cache state, the
-/// machine, the picks by time, and the remedies tried (a part tries every
-/// one that may be needed; the atlas shows the same chosen ones).
+/// machine, the picks by time, and the remedies tried and pictures taken (a
+/// part tries and pictures every one that may be needed; the page shows
+/// the same chosen ones).
 fn timings_aside(mut json: Value) -> Value {
-    const VARY: [&str; 9] = [
+    const VARY: [&str; 10] = [
         "times",
         "time",
         "profile",
@@ -287,6 +322,7 @@ fn timings_aside(mut json: Value) -> Value {
         "machine",
         "merged_from",
         "remedies",
+        "pictures",
         "recommendations",
     ];
     fn strip(v: &mut Value) {
@@ -380,6 +416,14 @@ fn two_parts_merge_into_one_runs_tables() {
         md[start..end].to_string()
     };
     assert_eq!(atlas(&whole), atlas(&merged));
+    // And so are the strip's pictures.
+    let strip = |dir: &Path| {
+        let md = read(dir, "report.md");
+        let start = md.find("## Per pixel against per vertex").expect("a strip");
+        let end = md[start..].find("## Stability atlas").unwrap() + start;
+        md[start..end].to_string()
+    };
+    assert_eq!(strip(&whole), strip(&merged));
     // Every image the page shows was brought over from the parts.
     let md = read(&merged, "report.md");
     for path in md.split("](").skip(1).filter_map(|s| s.split(')').next()) {

@@ -97,14 +97,44 @@ impl Camera {
     /// The unit direction of the ray through the centre of pixel (x, y), pixel
     /// (0, 0) at the top left.
     pub fn ray_direction(&self, x: u32, y: u32) -> Vec3 {
+        self.direction_at(x as f32 + 0.5, y as f32 + 0.5)
+    }
+
+    /// The unit direction through image point (x, y), in pixels from the
+    /// top left corner of the image.
+    pub fn direction_at(&self, x: f32, y: f32) -> Vec3 {
         let forward = (self.target - self.eye).normalize();
         let right = forward.cross(self.up).normalize();
         let up = right.cross(forward);
         let half_h = (self.fov_y * 0.5).tan();
         let half_w = half_h * self.aspect();
-        let sx = ((x as f32 + 0.5) / self.width as f32 * 2.0 - 1.0) * half_w;
-        let sy = (1.0 - (y as f32 + 0.5) / self.height as f32 * 2.0) * half_h;
+        let sx = (x / self.width as f32 * 2.0 - 1.0) * half_w;
+        let sy = (1.0 - y / self.height as f32 * 2.0) * half_h;
         (forward + right * sx + up * sy).normalize()
+    }
+
+    /// The same eye turned toward image point `center` (pixels from the top
+    /// left) and zoomed until the window `fraction` of the image's height
+    /// around it fills the frame; same size and aspect. A turn, not an
+    /// off-axis crop: the window's centre is exact, its edges move by the
+    /// cosine of the turn. Fails unless `0 < fraction <= 1`.
+    pub fn zoomed(&self, center: (f32, f32), fraction: f32) -> Result<Camera> {
+        if !(fraction > 0.0 && fraction <= 1.0) {
+            return Err(Error::InvalidScene(format!(
+                "camera zoom onto {fraction} of the frame is outside (0, 1]"
+            )));
+        }
+        let distance = (self.target - self.eye).length();
+        let direction = self.direction_at(center.0, center.1);
+        let fov_y = 2.0 * ((self.fov_y * 0.5).tan() * fraction).atan();
+        Camera::new(
+            self.eye,
+            self.eye + direction * distance,
+            self.up,
+            fov_y,
+            self.width,
+            self.height,
+        )
     }
 }
 
@@ -120,6 +150,29 @@ mod tests {
         assert_relative_eq!(cam.ray_direction(50, 50), Vec3::NEG_Z, epsilon = 1e-6);
         assert!(cam.ray_direction(50, 0).y > 0.0);
         assert!(cam.ray_direction(100, 50).x > 0.0);
+    }
+
+    #[test]
+    fn a_zoom_looks_through_the_window_it_frames() {
+        let cam =
+            Camera::new(Vec3::new(0.0, 1.0, 5.0), Vec3::ZERO, Vec3::Y, 0.8, 160, 120).unwrap();
+        // The whole frame around its centre is the same view.
+        let same = cam.zoomed((80.0, 60.0), 1.0).unwrap();
+        assert_relative_eq!(same.target, cam.target, epsilon = 1e-5);
+        assert_relative_eq!(same.fov_y, cam.fov_y, epsilon = 1e-6);
+        // A quarter of the frame around a point: the new centre ray is the
+        // old ray through that point, the view four times narrower.
+        let zoomed = cam.zoomed((40.0, 90.0), 0.25).unwrap();
+        let centre = (zoomed.target - zoomed.eye).normalize();
+        assert_relative_eq!(centre, cam.direction_at(40.0, 90.0), epsilon = 1e-5);
+        assert_relative_eq!(
+            (zoomed.fov_y * 0.5).tan(),
+            0.25 * (cam.fov_y * 0.5).tan(),
+            epsilon = 1e-6
+        );
+        assert_eq!((zoomed.width, zoomed.height), (160, 120));
+        assert!(cam.zoomed((80.0, 60.0), 0.0).is_err());
+        assert!(cam.zoomed((80.0, 60.0), 1.5).is_err());
     }
 
     #[test]

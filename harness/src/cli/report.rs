@@ -9,7 +9,9 @@ use clap::Args;
 use super::args::ScoringArgs;
 use crate::{
     methods::{Methods, SharedGpu},
+    pictures::PICTURE_WIDTH,
     progress::Progress,
+    reference::ReferenceSettings,
     report::{self, Part, Plan, Report},
     scenes::{self, SCENES, stress::STRESS_SCENES},
     suite::{Suite, Sweep},
@@ -53,9 +55,15 @@ pub struct ReportArgs {
     )]
     merge: Vec<PathBuf>,
     /// The folder to write index.html, report.md, report.json, report.csv,
-    /// charts/ and the strip's and atlas's images into.
+    /// charts/ and pictures/ into.
     #[arg(long, default_value = "reports")]
     out_dir: PathBuf,
+    /// Width in pixels of the pictures of the strip and the atlas (framed
+    /// on the errors they show, beside their error maps); their reference
+    /// converges to three times the scored images' noise.
+    #[arg(long, default_value_t = PICTURE_WIDTH,
+          value_parser = clap::value_parser!(u32).range(16..=4096))]
+    picture_width: u32,
     #[command(flatten)]
     scoring: ScoringArgs,
 }
@@ -165,6 +173,7 @@ fn plan(args: &ReportArgs, suite: Suite, methods: &Methods) -> Result<Plan> {
             }
         }
     }
+    let image = args.scoring.image.settings(&args.scoring.estimator);
     Ok(Plan {
         suite,
         scenes,
@@ -172,13 +181,19 @@ fn plan(args: &ReportArgs, suite: Suite, methods: &Methods) -> Result<Plan> {
         atlas_scenes,
         atlas_settings,
         vertex: args.scoring.estimator.settings(),
-        image: args.scoring.image.settings(&args.scoring.estimator),
+        image,
         image_width: args.scoring.image.image_width,
         repeats: args.scoring.repeats,
         cache: args.scoring.estimator.cache.clone(),
         images: args.scoring.image.images_dir.clone(),
         out_dir: args.out_dir.clone(),
         part: args.shard.unwrap_or(Part::WHOLE),
+        picture_width: args.picture_width,
+        picture: ReferenceSettings {
+            seed: image.seed,
+            target_noise: image.target_noise.map(|n| 3.0 * n),
+            ..ReferenceSettings::PICTURE
+        },
         scaling_settings: suite.scaling_settings(),
         scaling_widths: suite.scaling_widths().to_vec(),
     })

@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Block, Document, Figure, ReportRun, Table};
+use super::{Block, Document, Report, ReportRun, Table};
 use crate::run::RunResult;
 use crate::{methods::MethodSpec, reference::ReferenceInfo};
 
@@ -234,20 +234,20 @@ fn diagnose(setting: &str, outcome: &Outcome, standard: &[ReportRun]) -> String 
 }
 
 /// The atlas's section of the report.
-pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun]) {
-    if scenes.is_empty() {
+pub(super) fn blocks(doc: &mut Document, report: &Report) {
+    if report.atlas_scenes.is_empty() {
         return;
     }
     doc.push(Block::Heading(2, "Stability atlas".into()));
     doc.push(Block::Paragraph(
         "Each family's standard setting on scenes built to break something. Per-vertex relative \
-         error percentiles (worst frame), flicker, and a sentence from the measurements; the maps \
-         show per pixel where each method fails (0.1% to 100%, logarithmic). Where a setting fails \
-         (above 5% and twice its median error on the standard scenes), the best of its family's \
-         remedies on that scene follows it, marked \"instead of\"."
+         error percentiles (worst frame), flicker, and a sentence from the measurements. Where a \
+         setting fails (above 5% and twice its median error on the standard scenes), the best of \
+         its family's remedies on that scene follows it, marked \"instead of\", and pictures of \
+         both show where it fails, beside their error maps (0.1% to 100%, logarithmic)."
             .into(),
     ));
-    for scene in scenes {
+    for scene in &report.atlas_scenes {
         doc.push(Block::Heading(3, format!("Stress: {}", scene.name)));
         doc.push(Block::Paragraph(format!(
             "Built to break {} (reference noise {:.2}% per vertex).",
@@ -257,11 +257,12 @@ pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun
         let mut table = Table::new(&[
             "setting", "error#", "p50#", "p90#", "p99#", "max#", "flicker#", "why",
         ]);
-        let mut maps = vec![Figure {
-            path: format!("atlas/{}/reference.png", scene.name),
-            caption: "reference".into(),
-        }];
-        for run in runs.iter().filter(|r| r.scene == scene.name) {
+        let runs: Vec<&AtlasRun> = report
+            .atlas
+            .iter()
+            .filter(|r| r.scene == scene.name)
+            .collect();
+        for run in &runs {
             let percent = |v: f32| format!("{:.1}%", v * 100.0);
             match &run.outcome {
                 Outcome::Refused(_) => table.row(vec![
@@ -293,20 +294,12 @@ pub(super) fn blocks(doc: &mut Document, scenes: &[AtlasScene], runs: &[AtlasRun
                             .map_or("–".into(), |t| percent(t.error_change)),
                         run.diagnosis.clone(),
                     ]);
-                    if r.mean_image_error().is_some() {
-                        maps.push(Figure {
-                            path: format!(
-                                "atlas/{}/{}-error.png",
-                                scene.name,
-                                crate::images::file_stem(&r.method)
-                            ),
-                            caption: format!("{} error", run.setting),
-                        });
-                    }
                 }
             }
         }
         doc.push(Block::Table(table));
-        doc.push(Block::Figures(maps));
+        for block in super::gallery::atlas_rows(report, &scene.name, &runs) {
+            doc.push(block);
+        }
     }
 }

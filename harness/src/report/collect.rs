@@ -12,6 +12,7 @@ use super::{
 use crate::{
     images,
     methods::{MethodSpec, SharedGpu},
+    pictures::{self, Shot, Taken},
     progress::Progress,
     reference::{
         ImageReference, ImageReferenceInfo, ReferenceCache, ReferenceInfo, ReferenceSettings,
@@ -43,10 +44,14 @@ pub struct Plan {
     pub cache: PathBuf,
     /// Where every scene's images go, when asked.
     pub images: Option<PathBuf>,
-    /// The report's folder: the strip's and the atlas's images go under it.
+    /// The report's folder: the pictures go under it.
     pub out_dir: PathBuf,
     /// Which part of the scenes to run ([`Part::WHOLE`] for all).
     pub part: Part,
+    /// The pictures' width and their reference's settings
+    /// ([`crate::pictures`]).
+    pub picture_width: u32,
+    pub picture: ReferenceSettings,
     /// The settings timed across widths on [`SCALING_SCENES`], and the
     /// widths.
     pub scaling_settings: Vec<MethodSpec>,
@@ -143,11 +148,11 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         runs: Vec::new(),
         skipped: Vec::new(),
         failed: Vec::new(),
-        strip: None,
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
         remedies: Vec::new(),
         scaling: Vec::new(),
+        pictures: Vec::new(),
         merged_from: Vec::new(),
     };
     let overall = progress.runs(plan.run_count());
@@ -219,9 +224,38 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         if let (Some(dir), Some(reference)) = (&plan.images, references.image.last()) {
             images::write_scene(dir, name, &reference.image, &runs)?;
         }
-        if let (true, Some(reference)) = (name == STRIP_SCENE, references.image.last()) {
-            images::write_scene(&plan.out_dir.join("strip"), name, &reference.image, &runs)?;
-            report.strip = Some(name.to_string());
+        if name == STRIP_SCENE {
+            // The strip's settings that drew an image, framed on their errors.
+            let runs = &report.runs[first_run..];
+            let (shown, specs): (Vec<&RunResult>, Vec<&MethodSpec>) = Suite::strip_settings()
+                .iter()
+                .filter_map(|m| {
+                    let run = runs.iter().find(|r| r.setting == m.name())?;
+                    let spec = plan.sweeps.iter().flat_map(|s| &s.methods);
+                    Some((&run.result, spec.clone().find(|s| s.name() == m.name())?))
+                })
+                .unzip();
+            overall.set_message(format!("{name}: pictures"));
+            let view = View {
+                scene: &scene,
+                environment: &environment,
+                references: &references,
+            };
+            let taken = take_pictures(&view, &shown, &specs, plan, gpu, &cache, progress)?;
+            if let Some(Taken {
+                pictures,
+                failed: errors,
+            }) = taken
+            {
+                for (setting, e) in errors {
+                    failed(&mut report, &format!("{setting} (picture)"), name, &e);
+                }
+                progress.say(format!(
+                    "{name:<10} pictures: reference {:.1} s",
+                    pictures.reference_seconds
+                ));
+                report.pictures.push(pictures);
+            }
         }
         if SCALING_SCENES.contains(&name) {
             overall.inc_length(plan.scaling_settings.len() as u64);
@@ -270,15 +304,19 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         }
         // Where a standard setting fails, its family's remedies. Whether
         // it fails depends on every standard scene; a part, which has not
-        // run them all, tries every setting that may fail.
-        for i in first.0..report.atlas.len() {
+        // run them all, tries every setting that may fail. The pictures
+        // show every setting that may fail (framed on them alike in a part
+        // and in one run) and the remedies tried.
+        let mut may_fail = Vec::new();
+        let mut pictured: Vec<MethodSpec> = Vec::new();
+        for (i, spec) in (first.0..report.atlas.len()).zip(&plan.atlas_settings) {
             let run = &report.atlas[i];
-            let fails = if plan.part.is_whole() {
-                run.fails(&report.runs)
-            } else {
-                run.may_fail()
-            };
-            if !fails {
+            if !run.may_fail() {
+                continue;
+            }
+            may_fail.push(i);
+            pictured.push(spec.clone());
+            if plan.part.is_whole() && !run.fails(&report.runs) {
                 continue;
             }
             let remedies = crate::suite::remedies(&run.family);
@@ -288,19 +326,51 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
                 let outcome = run_stressed(&spec, &stress, &references, plan.repeats, gpu);
                 let remedy = AtlasRun::remedy(&report.atlas[i], &spec, outcome);
                 report.remedies.push(remedy);
+                pictured.push(spec);
                 overall.inc(1);
             }
         }
-        let runs: Vec<&RunResult> = report.atlas[first.0..]
+        let shown: Vec<&RunResult> = may_fail
             .iter()
-            .chain(&report.remedies[first.1..])
-            .filter_map(|a| match &a.outcome {
+            .filter_map(|&i| match &report.atlas[i].outcome {
                 Outcome::Ran(r) => Some(r.as_ref()),
                 Outcome::Refused(_) => None,
             })
             .collect();
-        if let Some(reference) = references.image.last() {
-            images::write_scene(&plan.out_dir.join("atlas"), name, &reference.image, &runs)?;
+        if !shown.is_empty() {
+            overall.set_message(format!("{name}: pictures"));
+            let view = View {
+                scene: &stress.scene,
+                environment: &stress.environment,
+                references: &references,
+            };
+            let specs: Vec<&MethodSpec> = pictured.iter().collect();
+            let taken = take_pictures(&view, &shown, &specs, plan, gpu, &cache, progress)?;
+            if let Some(Taken {
+                pictures,
+                failed: errors,
+            }) = taken
+            {
+                for (setting, e) in errors {
+                    failed(&mut report, &format!("{setting} (picture)"), name, &e);
+                }
+                progress.say(format!(
+                    "{name:<10} pictures: reference {:.1} s",
+                    pictures.reference_seconds
+                ));
+                report.pictures.push(pictures);
+            }
+        }
+        if let (Some(dir), Some(reference)) = (&plan.images, references.image.last()) {
+            let runs: Vec<&RunResult> = report.atlas[first.0..]
+                .iter()
+                .chain(&report.remedies[first.1..])
+                .filter_map(|a| match &a.outcome {
+                    Outcome::Ran(r) => Some(r.as_ref()),
+                    Outcome::Refused(_) => None,
+                })
+                .collect();
+            images::write_scene(dir, name, &reference.image, &runs)?;
         }
         report.atlas_scenes.push(atlas_scene);
     }
@@ -337,6 +407,54 @@ fn time_across_widths(
         per_pixel,
         widths,
     })
+}
+
+/// A scene as the pictures see it: its environment and scored references.
+struct View<'a> {
+    scene: &'a Scene,
+    environment: &'a Environment,
+    references: &'a SceneReferences,
+}
+
+/// The pictures of `specs` on `view`'s scene, framed on the errors of the
+/// runs `shown` in the scored images (their last frame), into
+/// `out_dir/pictures/{scene}`; `None` without a scored image to frame by.
+fn take_pictures(
+    view: &View,
+    shown: &[&RunResult],
+    specs: &[&MethodSpec],
+    plan: &Plan,
+    gpu: &SharedGpu,
+    cache: &ReferenceCache,
+    progress: &Progress,
+) -> Result<Option<Taken>> {
+    let Some(reference) = view.references.image.last() else {
+        return Ok(None);
+    };
+    let scored = &view.references.camera;
+    let mut errors = vec![0.0; (scored.width * scored.height) as usize];
+    for run in shown {
+        if let Some(image) = &run.last_image {
+            for (sum, e) in errors
+                .iter_mut()
+                .zip(pictures::error_weights(image, &reference.image))
+            {
+                *sum += e;
+            }
+        }
+    }
+    let (center, fraction) = pictures::window(scored.width, scored.height, &errors);
+    let shot = Shot {
+        scene: view.scene,
+        environment: view.environment,
+        scored,
+        center,
+        fraction,
+        width: plan.picture_width,
+        reference: &plan.picture,
+    };
+    let folder = format!("pictures/{}", view.scene.name());
+    pictures::take(&shot, specs, gpu, cache, &plan.out_dir, &folder, progress).map(Some)
 }
 
 /// `spec` on a stress scene: its run, or why it could not run.

@@ -14,6 +14,7 @@ mod analyse;
 mod atlas;
 mod collect;
 mod document;
+mod gallery;
 mod machine;
 mod parts;
 mod recommend;
@@ -25,6 +26,7 @@ mod tests;
 use serde::{Deserialize, Serialize};
 
 use crate::{
+    pictures::Pictures,
     reference::ReferenceInfo,
     run::RunResult,
     scaling::ScalingRun,
@@ -110,11 +112,7 @@ pub struct Report {
     /// Settings (or a scene's references, `reference`) that failed, and
     /// the error.
     pub failed: Vec<Skipped>,
-    /// The scene whose images the report shows side by side
-    /// ([`crate::suite::STRIP_SCENE`]), when its images were written (under
-    /// `strip/{scene}/`).
-    pub strip: Option<String>,
-    /// The stability atlas's scenes and runs (images under `atlas/{scene}/`):
+    /// The stability atlas's scenes and runs:
     /// each standard setting, and after each that fails the best of its
     /// remedies.
     pub atlas_scenes: Vec<AtlasScene>,
@@ -124,6 +122,9 @@ pub struct Report {
     /// Time per image across widths ([`crate::scaling`]) on the scenes of
     /// [`crate::suite::SCALING_SCENES`] the report ran.
     pub scaling: Vec<ScalingRun>,
+    /// The pictures of the strip's scene ([`crate::suite::STRIP_SCENE`]) and
+    /// of the stress scenes where a setting may fail, under `pictures/`.
+    pub pictures: Vec<Pictures>,
     /// For a report merged from parts, the machine each part ran on, in
     /// part order; empty for one run.
     pub merged_from: Vec<MachineInfo>,

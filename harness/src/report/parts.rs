@@ -81,9 +81,8 @@ impl FromStr for Part {
 }
 
 impl Report {
-    /// Writes a part's results into `dir`: its `report.json` (the strip's
-    /// and atlas's images are already there), which [`Report::read`] reads
-    /// back.
+    /// Writes a part's results into `dir`: its `report.json` (its pictures
+    /// are already there), which [`Report::read`] reads back.
     pub fn write_part(&self, dir: &Path) -> Result<()> {
         crate::io::write_json_atomic(&dir.join("report.json"), self)
     }
@@ -165,11 +164,11 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
         runs: Vec::new(),
         skipped: Vec::new(),
         failed: Vec::new(),
-        strip: None,
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
         remedies: Vec::new(),
         scaling: Vec::new(),
+        pictures: Vec::new(),
         merged_from: parts.iter().map(|r| r.machine.clone()).collect(),
     };
     if merged.machine.adapter.is_none() {
@@ -180,11 +179,11 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
         merged.runs.extend(part.runs);
         merged.skipped.extend(part.skipped);
         merged.failed.extend(part.failed);
-        merged.strip = merged.strip.or(part.strip);
         merged.atlas_scenes.extend(part.atlas_scenes);
         merged.atlas.extend(part.atlas);
         merged.remedies.extend(part.remedies);
         merged.scaling.extend(part.scaling);
+        merged.pictures.extend(part.pictures);
     }
     // Stable sorts: within a scene, the order its part ran in.
     merged.references.sort_by_key(|r| unit(&r.scene));
@@ -195,17 +194,15 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
     merged.atlas.sort_by_key(|r| unit(&r.scene));
     merged.remedies.sort_by_key(|r| unit(&r.scene));
     merged.scaling.sort_by_key(|r| unit(&r.scene));
+    merged.pictures.sort_by_key(|r| unit(&r.scene));
     merged.judge_atlas();
     Ok(merged)
 }
 
-/// Copies the images a part wrote (`strip/` and `atlas/` under `part`) into
-/// the merged report's folder `out_dir`, each file atomically.
+/// Copies the pictures a part wrote (`pictures/` under `part`) into the
+/// merged report's folder `out_dir`, each file atomically.
 pub fn copy_images(part: &Path, out_dir: &Path) -> Result<()> {
-    for folder in ["strip", "atlas"] {
-        copy_tree(&part.join(folder), &out_dir.join(folder))?;
-    }
-    Ok(())
+    copy_tree(&part.join("pictures"), &out_dir.join("pictures"))
 }
 
 /// Every file under `from` to the same place under `to`; nothing when

@@ -14,7 +14,6 @@ use crate::{
     io::{write_atomic, write_json_atomic},
     run::FrameResult,
     score::ErrorStats,
-    suite::Suite,
     timing::Timing,
 };
 
@@ -320,10 +319,8 @@ impl Report {
             doc.push(Block::Bullets(profiled));
         }
         self.resolution_blocks(&mut doc);
-        if let Some(scene) = &self.strip {
-            self.strip_blocks(&mut doc, scene);
-        }
-        atlas::blocks(&mut doc, &self.atlas_scenes, &self.atlas);
+        self.strip_blocks(&mut doc);
+        atlas::blocks(&mut doc, self);
         for (heading, list) in [
             ("Failed", &self.failed),
             ("Not run (not supported)", &self.skipped),
@@ -523,51 +520,6 @@ impl Report {
             ]);
         }
         t
-    }
-
-    /// The strip: the reference, then each strip setting's image and its
-    /// error map, with its error per pixel.
-    fn strip_blocks(&self, doc: &mut Document, scene: &str) {
-        let runs: Vec<&ReportRun> = Suite::strip_settings()
-            .iter()
-            .filter_map(|m| {
-                self.runs_of(scene)
-                    .find(|r| r.setting == m.name() && r.result.mean_image_error().is_some())
-            })
-            .collect();
-        doc.push(Block::Heading(
-            2,
-            format!("Per pixel against per vertex: {scene}"),
-        ));
-        doc.push(Block::Paragraph(
-            "The contact shadow on a floor of two triangles: per-vertex methods interpolate \
-             between the floor's four corners, deferred shadowing draws it per pixel. First row: \
-             the images (the reference's exposure); second: relative error per pixel (0.1% to \
-             100%, logarithmic, colour scale beneath each map)."
-                .into(),
-        ));
-        let mut images = vec![Figure {
-            path: format!("strip/{scene}/reference.png"),
-            caption: "reference".into(),
-        }];
-        let mut errors = Vec::new();
-        for r in &runs {
-            let label = crate::images::file_stem(&r.result.method);
-            images.push(Figure {
-                path: format!("strip/{scene}/{label}.png"),
-                caption: format!(
-                    "{} ({:.1}%)",
-                    r.setting,
-                    100.0 * r.result.mean_image_error().unwrap_or(f32::NAN)
-                ),
-            });
-            errors.push(Figure {
-                path: format!("strip/{scene}/{label}-error.png"),
-                caption: format!("{} error", r.setting),
-            });
-        }
-        doc.push(Block::Figures(images));
-        doc.push(Block::Figures(errors));
     }
 }
 

@@ -111,11 +111,11 @@ fn report() -> Report {
             scene: "human".into(),
             why: "GPU: device lost".into(),
         }],
-        strip: None,
         atlas_scenes: Vec::new(),
         atlas: Vec::new(),
         remedies: Vec::new(),
         scaling: Vec::new(),
+        pictures: Vec::new(),
         merged_from: Vec::new(),
     }
 }

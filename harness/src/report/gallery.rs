@@ -1,0 +1,117 @@
+//! The report's pictures ([`crate::pictures`]): the strip, where per-pixel
+//! and per-vertex methods draw the bunny's contact shadow side by side, and
+//! in the atlas each failing setting beside its remedy. A row per setting:
+//! its picture, then its error map at the same size.
+
+use super::{AtlasRun, Block, Document, Figure, Report};
+use crate::{
+    pictures::{Picture, Pictures},
+    suite::{STRIP_SCENE, Suite},
+};
+
+impl Report {
+    /// The pictures taken of `scene`, if any.
+    pub fn pictures_of(&self, scene: &str) -> Option<&Pictures> {
+        self.pictures.iter().find(|p| p.scene == scene)
+    }
+
+    /// The strip's section: the reference, then each strip setting's
+    /// picture beside its error map.
+    pub(super) fn strip_blocks(&self, doc: &mut Document) {
+        let Some(set) = self.pictures_of(STRIP_SCENE) else {
+            return;
+        };
+        let shown: Vec<&Picture> = Suite::strip_settings()
+            .iter()
+            .filter_map(|m| set.of(m.name()))
+            .collect();
+        if shown.is_empty() {
+            return;
+        }
+        doc.push(Block::Heading(
+            2,
+            format!("Per pixel against per vertex: {STRIP_SCENE}"),
+        ));
+        doc.push(Block::Paragraph(format!(
+            "The contact shadow on a floor of two triangles: per-vertex methods interpolate \
+             between the floor's four corners, deferred shadowing draws it per pixel. {} Each row: \
+             a setting's picture (the reference's exposure) and its relative error per pixel \
+             (0.1% to 100%, logarithmic, the colour scale beneath each map).",
+            framing(set)
+        )));
+        doc.push(reference_row(set));
+        for picture in shown {
+            doc.push(row(set, picture));
+        }
+    }
+}
+
+/// The atlas's pictures of `scene`: after the reference, each failing
+/// setting of `runs` (in their order) and the remedy that follows it; none
+/// without pictures of the scene.
+pub(super) fn atlas_rows(report: &Report, scene: &str, runs: &[&AtlasRun]) -> Vec<Block> {
+    let Some(set) = report.pictures_of(scene) else {
+        return Vec::new();
+    };
+    let shown: Vec<&Picture> = runs
+        .iter()
+        .filter(|r| r.remedy_for.is_some() || r.fails(&report.runs))
+        .filter_map(|r| set.of(&r.setting))
+        .collect();
+    if shown.is_empty() {
+        return Vec::new();
+    }
+    let mut blocks = vec![
+        Block::Paragraph(format!(
+            "{} Each row: a failing setting or its remedy, and its error map.",
+            framing(set)
+        )),
+        reference_row(set),
+    ];
+    blocks.extend(shown.into_iter().map(|p| row(set, p)));
+    blocks
+}
+
+/// What the pictures show: the frame, the zoom, the reference's noise.
+fn framing(set: &Pictures) -> String {
+    let zoom = if set.zoom < 1.0 {
+        format!(
+            "zoomed {:.1}× onto where the shown settings' errors concentrate in the scored images",
+            1.0 / set.zoom
+        )
+    } else {
+        "the whole view (the errors spread over it)".to_string()
+    };
+    format!(
+        "Pictures {}×{} of frame {}, {zoom}; their reference's noise is {:.1}%.",
+        set.width,
+        set.height,
+        set.frame,
+        set.reference_noise * 100.0
+    )
+}
+
+fn reference_row(set: &Pictures) -> Block {
+    Block::Figures(vec![Figure {
+        path: format!("{}/reference.png", set.folder),
+        caption: "reference".into(),
+    }])
+}
+
+/// A setting's picture and its error map, side by side.
+fn row(set: &Pictures, picture: &Picture) -> Block {
+    Block::Figures(vec![
+        Figure {
+            path: format!("{}/{}.png", set.folder, picture.stem),
+            caption: format!(
+                "{}: {:.1}% error in this view",
+                picture.setting,
+                picture.error * 100.0
+            ),
+        },
+        Figure {
+            path: format!("{}/{}-error.png", set.folder, picture.stem),
+            caption: format!("{} error", picture.setting),
+        },
+    ])
+}
