@@ -28,11 +28,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Writes 8-bit RGB pixels, `width` × `height` row by row, as a PNG at
-/// `path`, atomically.
+/// `path`, atomically; compressed hard, since the report's page embeds
+/// every one.
 pub fn write_png_atomic(path: &Path, rgb: &[u8], width: u32, height: u32) -> Result<()> {
-    use image::{ExtendedColorType, ImageEncoder, codecs::png::PngEncoder};
+    use image::{
+        ExtendedColorType, ImageEncoder,
+        codecs::png::{CompressionType, FilterType, PngEncoder},
+    };
     let mut png = Vec::new();
-    PngEncoder::new(&mut png)
+    PngEncoder::new_with_quality(&mut png, CompressionType::Best, FilterType::Adaptive)
         .write_image(rgb, width, height, ExtendedColorType::Rgb8)
         .map_err(|e| Error::format(path, format!("encoding the PNG: {e}")))?;
     write_atomic(path, &png)
