@@ -48,6 +48,17 @@ pub fn write_json_atomic(path: &Path, value: &impl serde::Serialize) -> Result<(
     write_atomic(path, &json)
 }
 
+/// Reads a float field that [`write_json_atomic`] may have written as
+/// `null`: JSON has no NaN or infinity, and serde_json writes a non-finite
+/// float as `null`, which this reads back as NaN (non-finite either way).
+/// For `#[serde(deserialize_with = "crate::io::f32_or_null")]`.
+pub fn f32_or_null<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> std::result::Result<f32, D::Error> {
+    use serde::Deserialize;
+    Option::<f32>::deserialize(deserializer).map(|v| v.unwrap_or(f32::NAN))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,5 +1,5 @@
-//! Pictures for people: a scene rendered [`PICTURE_WIDTH`] pixels wide by
-//! each setting shown, framed on where their errors concentrate (the
+//! Pictures for people: a scene rendered [`PICTURE_WIDTH`] pixels wide (or
+//! as asked) by each setting shown, framed on where their errors concentrate (the
 //! bunny's contact shadow, a stress scene's failing region), each beside
 //! its error map at the same size and on the same colour scale, against a
 //! reference of the same view.
@@ -28,8 +28,9 @@ use crate::{
 /// The pictures' width in pixels (the scene camera's aspect kept).
 pub const PICTURE_WIDTH: u32 = 512;
 
-/// The narrowest window a picture frames, as a fraction of the scored
-/// view's height: a closer zoom would show fewer triangles than pixels.
+/// The closest zoom a picture frames: its window is at least 1 / `MAX_ZOOM`
+/// of the scored view's height (a closer one would show fewer triangles
+/// than pixels).
 pub const MAX_ZOOM: f32 = 3.0;
 
 /// One setting's picture.
@@ -40,6 +41,7 @@ pub struct Picture {
     /// (`{stem}-error.png`) in the set's folder.
     pub stem: String,
     /// Its relative L2 error against the pictures' reference.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub error: f32,
 }
 
@@ -59,9 +61,20 @@ pub struct Pictures {
     pub zoom: f32,
     /// The pictures' reference's relative noise, and the seconds it took
     /// (0 from the cache).
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub reference_noise: f32,
     pub reference_seconds: f64,
     pub shown: Vec<Picture>,
+    /// The settings whose picture failed to render, and why (the page says
+    /// so where it would show them).
+    pub failed: Vec<Unrendered>,
+}
+
+/// A setting whose picture failed to render.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Unrendered {
+    pub setting: String,
+    pub why: String,
 }
 
 impl Pictures {
@@ -131,13 +144,6 @@ pub fn error_weights(image: &Image, reference: &Image) -> Vec<f32> {
         .collect()
 }
 
-/// What [`take`] made: the pictures, and the settings that failed to
-/// render with their errors.
-pub struct Taken {
-    pub pictures: Pictures,
-    pub failed: Vec<(String, Error)>,
-}
-
 /// What [`take`] shows and how.
 pub struct Shot<'a> {
     pub scene: &'a Scene,
@@ -155,7 +161,7 @@ pub struct Shot<'a> {
 /// scene, framed as it says, with the reference of that view from `cache`;
 /// writes `reference.png` and each setting's picture and error map into
 /// `dir/folder`. A setting that cannot run on the scene is left out; one
-/// that fails is in [`Taken::failed`] with its error.
+/// that fails is in [`Pictures::failed`] with its error.
 pub fn take(
     shot: &Shot,
     specs: &[&MethodSpec],
@@ -164,7 +170,7 @@ pub fn take(
     dir: &Path,
     folder: &str,
     progress: &Progress,
-) -> Result<Taken> {
+) -> Result<Pictures> {
     let scale = shot.width as f32 / shot.scored.width as f32;
     let camera = shot.scored.with_width(shot.width)?.zoomed(
         (shot.center.0 * scale, shot.center.1 * scale),
@@ -199,7 +205,10 @@ pub fn take(
             Ok(image) => image,
             Err(Error::Unsupported { .. }) => continue,
             Err(e) => {
-                failed.push((spec.name().to_string(), e));
+                failed.push(Unrendered {
+                    setting: spec.name().to_string(),
+                    why: e.to_string(),
+                });
                 continue;
             }
         };
@@ -226,8 +235,9 @@ pub fn take(
         reference_noise: reference.noise,
         reference_seconds: if cached { 0.0 } else { reference.seconds },
         shown,
+        failed,
     };
-    Ok(Taken { pictures, failed })
+    Ok(pictures)
 }
 
 #[cfg(test)]

@@ -11,17 +11,23 @@ use crate::reference::{ImageReference, VertexReference};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ErrorStats {
     /// `sqrt(Σ|x − r|² / Σ|r|²)` over the domain, on linear RGB.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub relative_l2: f32,
     /// Median of the per-element relative error.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub p50: f32,
     /// 90th percentile of the per-element relative error.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub p90: f32,
     /// 99th percentile of the per-element relative error.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub p99: f32,
     /// Largest per-element relative error.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub max: f32,
     /// The reference's own relative L2 noise, `sqrt(Σ|SE|² / Σ|r|²)`: errors
     /// near this are indistinguishable from zero.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub reference_noise: f32,
     /// Elements compared.
     pub count: usize,
@@ -108,12 +114,15 @@ pub fn image(image: &Image, reference: &ImageReference) -> Result<ErrorStats> {
 pub struct Temporal {
     /// `sqrt(Σ|e_t − e_{t−1}|² / Σ|r_t|²)` with `e = x − r` per vertex, over
     /// the vertices evaluated in both frames.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub error_change: f32,
     /// The same of the reference itself, `sqrt(Σ|r_t − r_{t−1}|² / Σ|r_t|²)`:
     /// how much the true shading moves between the two frames.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub reference_change: f32,
     /// The part of `error_change` the references' noise explains:
     /// `sqrt(n_t² + n_{t−1}²)`, their relative L2 noises combined.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub noise_floor: f32,
 }
 

@@ -429,7 +429,7 @@ fn two_parts_merge_into_one_runs_tables() {
     for path in md.split("](").skip(1).filter_map(|s| s.split(')').next()) {
         assert!(merged.join(path).is_file(), "{path}: missing");
     }
-    // A part given twice, or missing, is refused.
+    // A missing part is refused.
     let refused = harness(&[
         "report",
         "--merge",

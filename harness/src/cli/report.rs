@@ -46,12 +46,13 @@ pub struct ReportArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<Part>,
     /// Build the report from the folders of parts written with --shard
-    /// (every part of one plan, once), instead of running anything.
+    /// (every part of one plan, once), instead of running anything; the
+    /// parts' settings are the report's.
     #[arg(
         long,
         value_name = "DIR",
         num_args = 1..,
-        conflicts_with_all = ["shard", "suite", "quick", "full", "scenes", "methods"]
+        conflicts_with_all = ["shard", "suite", "quick", "full", "scenes", "methods", "picture_width"]
     )]
     merge: Vec<PathBuf>,
     /// The folder to write index.html, report.md, report.json, report.csv,
@@ -94,7 +95,7 @@ pub fn report(args: ReportArgs, methods: &Methods, progress: &Progress) -> Resul
             args.out_dir.display()
         );
     }
-    failures(&report, plan.run_count())
+    failures(&report, Some(plan.run_count()))
 }
 
 /// `report --merge`: the report from its parts' folders.
@@ -114,17 +115,17 @@ fn merge(dirs: &[PathBuf], out_dir: &Path) -> Result<()> {
         dirs.len(),
         out_dir.display()
     );
-    let runs = report.runs.len() + report.atlas.len() + report.failed.len();
-    failures(&report, runs)
+    failures(&report, None)
 }
 
-/// Fails, after the report is written, when any of its `runs` failed.
-fn failures(report: &Report, runs: usize) -> Result<()> {
+/// Fails, after the report is written, when any of its runs (`runs` of
+/// them, where known) failed.
+fn failures(report: &Report, runs: Option<usize>) -> Result<()> {
     if !report.failed.is_empty() {
         bail!(
-            "{} of {} runs failed (listed in the report): {}",
+            "{}{} runs failed (listed in the report): {}",
             report.failed.len(),
-            runs,
+            runs.map_or(String::new(), |n| format!(" of {n}")),
             report
                 .failed
                 .iter()

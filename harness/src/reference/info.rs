@@ -20,6 +20,7 @@ pub struct ReferenceInfo {
     pub frames: usize,
     pub vertices: usize,
     /// Worst per-frame relative L2 noise.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub noise: f32,
     pub rays: u64,
     /// Seconds spent computing it (0 when every frame came from the cache).
@@ -37,6 +38,7 @@ pub struct ImageReferenceInfo {
     /// Covered pixels, summed over frames.
     pub pixels: usize,
     /// Worst per-frame relative L2 noise over the covered pixels.
+    #[serde(deserialize_with = "crate::io::f32_or_null")]
     pub noise: f32,
     pub rays: u64,
     pub seconds: f64,

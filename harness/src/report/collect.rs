@@ -12,7 +12,7 @@ use super::{
 use crate::{
     images,
     methods::{MethodSpec, SharedGpu},
-    pictures::{self, Shot, Taken},
+    pictures::{self, Pictures, Shot},
     progress::Progress,
     reference::{
         ImageReference, ImageReferenceInfo, ReferenceCache, ReferenceInfo, ReferenceSettings,
@@ -137,6 +137,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             target_noise: plan.vertex.target_noise.unwrap_or(0.0),
             image_target_noise: plan.image.target_noise.unwrap_or(0.0),
             image_width: plan.image_width,
+            picture_width: plan.picture_width,
             repeats: plan.repeats,
             seed: plan.vertex.seed,
             scenes: plan.scenes.iter().map(|s| s.to_string()).collect(),
@@ -242,13 +243,9 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
                 references: &references,
             };
             let taken = take_pictures(&view, &shown, &specs, plan, gpu, &cache, progress)?;
-            if let Some(Taken {
-                pictures,
-                failed: errors,
-            }) = taken
-            {
-                for (setting, e) in errors {
-                    failed(&mut report, &format!("{setting} (picture)"), name, &e);
+            if let Some(pictures) = taken {
+                for f in &pictures.failed {
+                    progress.say(format!("{name}: no picture of {}: {}", f.setting, f.why));
                 }
                 progress.say(format!(
                     "{name:<10} pictures: reference {:.1} s",
@@ -346,13 +343,9 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             };
             let specs: Vec<&MethodSpec> = pictured.iter().collect();
             let taken = take_pictures(&view, &shown, &specs, plan, gpu, &cache, progress)?;
-            if let Some(Taken {
-                pictures,
-                failed: errors,
-            }) = taken
-            {
-                for (setting, e) in errors {
-                    failed(&mut report, &format!("{setting} (picture)"), name, &e);
+            if let Some(pictures) = taken {
+                for f in &pictures.failed {
+                    progress.say(format!("{name}: no picture of {}: {}", f.setting, f.why));
                 }
                 progress.say(format!(
                     "{name:<10} pictures: reference {:.1} s",
@@ -427,7 +420,7 @@ fn take_pictures(
     gpu: &SharedGpu,
     cache: &ReferenceCache,
     progress: &Progress,
-) -> Result<Option<Taken>> {
+) -> Result<Option<Pictures>> {
     let Some(reference) = view.references.image.last() else {
         return Ok(None);
     };

@@ -21,11 +21,12 @@ impl Report {
         let Some(set) = self.pictures_of(STRIP_SCENE) else {
             return;
         };
-        let shown: Vec<&Picture> = Suite::strip_settings()
+        let settings: Vec<String> = Suite::strip_settings()
             .iter()
-            .filter_map(|m| set.of(m.name()))
+            .map(|m| m.name().to_string())
             .collect();
-        if shown.is_empty() {
+        let rows = rows(set, settings.iter().map(String::as_str));
+        if rows.is_empty() {
             return;
         }
         doc.push(Block::Heading(
@@ -40,8 +41,8 @@ impl Report {
             framing(set)
         )));
         doc.push(reference_row(set));
-        for picture in shown {
-            doc.push(row(set, picture));
+        for block in rows {
+            doc.push(block);
         }
     }
 }
@@ -53,12 +54,12 @@ pub(super) fn atlas_rows(report: &Report, scene: &str, runs: &[&AtlasRun]) -> Ve
     let Some(set) = report.pictures_of(scene) else {
         return Vec::new();
     };
-    let shown: Vec<&Picture> = runs
+    let shown = runs
         .iter()
         .filter(|r| r.remedy_for.is_some() || r.fails(&report.runs))
-        .filter_map(|r| set.of(&r.setting))
-        .collect();
-    if shown.is_empty() {
+        .map(|r| r.setting.as_str());
+    let rows = rows(set, shown);
+    if rows.is_empty() {
         return Vec::new();
     }
     let mut blocks = vec![
@@ -68,8 +69,23 @@ pub(super) fn atlas_rows(report: &Report, scene: &str, runs: &[&AtlasRun]) -> Ve
         )),
         reference_row(set),
     ];
-    blocks.extend(shown.into_iter().map(|p| row(set, p)));
+    blocks.extend(rows);
     blocks
+}
+
+/// A row per setting of `settings` that `set` pictured, or a sentence
+/// where its picture failed; nothing for the others.
+fn rows<'a>(set: &Pictures, settings: impl Iterator<Item = &'a str>) -> Vec<Block> {
+    settings
+        .filter_map(|setting| match set.of(setting) {
+            Some(picture) => Some(row(set, picture)),
+            None => set
+                .failed
+                .iter()
+                .find(|f| f.setting == setting)
+                .map(|f| Block::Paragraph(format!("No picture of {setting}: {}.", f.why))),
+        })
+        .collect()
 }
 
 /// What the pictures show: the frame, the zoom, the reference's noise.

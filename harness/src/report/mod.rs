@@ -56,6 +56,8 @@ pub struct Settings {
     pub image_target_noise: f32,
     /// Width of the scored images (each scene camera's aspect kept).
     pub image_width: u32,
+    /// Width of the pictures ([`crate::pictures`]).
+    pub picture_width: u32,
     /// Repeats per stage (at least three samples where it allows; medians
     /// and ranges reported).
     pub repeats: usize,

@@ -2,7 +2,8 @@
 //! matrix's jobs) and merged into one.
 //!
 //! A part is a whole number of the plan's scenes, dealt round-robin: the
-//! built-in scenes then the stress scenes, the `u`-th to part `u mod N`.
+//! built-in scenes then the stress scenes, the `u`-th (from 0) to part
+//! `(u mod N) + 1`.
 //! Each part writes its `report.json` and its images; [`merge`] puts the
 //! runs back in the plan's order and judges the atlas again over every
 //! standard scene ([`super::atlas::judge`]), so the merged page's tables are
@@ -125,6 +126,15 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
             ));
         }
         let p = part.settings.part;
+        if p.count != count || p.index == 0 || p.index > count {
+            return Err(Error::config(
+                "--merge",
+                format!(
+                    "{name} is part {p}, {first_name} part {} of {count}",
+                    first.settings.part.index
+                ),
+            ));
+        }
         if let Some(other) = seen[p.index - 1].replace(name) {
             return Err(Error::config(
                 "--merge",

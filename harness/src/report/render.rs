@@ -347,8 +347,8 @@ impl Report {
             ),
             format!("repeats per stage: {}", s.repeats),
             format!(
-                "command: `cargo run --release -p harness -- report --suite {suite} --target {} --image-target {} --image-width {} --seed {} --repeats {}`",
-                s.target_noise, s.image_target_noise, s.image_width, s.seed, s.repeats
+                "command: `cargo run --release -p harness -- report --suite {suite} --target {} --image-target {} --image-width {} --picture-width {} --seed {} --repeats {}`",
+                s.target_noise, s.image_target_noise, s.image_width, s.picture_width, s.seed, s.repeats
             ),
             format!(
                 "settings run: {}",

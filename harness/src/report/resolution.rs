@@ -92,7 +92,7 @@ impl Report {
                         equal_error_ms(&at, error)
                     })
                     .collect();
-                let ray_tracer_ms = ray_tracer_ms?;
+                let ray_tracer_ms = ray_tracer_ms.filter(|ms| !ms.is_empty())?;
                 let ratios: Vec<(f64, f64)> = run
                     .widths
                     .iter()
@@ -235,7 +235,7 @@ impl Report {
                 .map_or("–".into(), |e| format!("{:.2}%", e * 100.0));
             let (rt, overtakes) = match comparison {
                 Some(c) => {
-                    let (ms, extrapolated) = c.ray_tracer_ms[c.ray_tracer_ms.len() - 1];
+                    let (ms, extrapolated) = c.ray_tracer_ms.last().copied().unwrap_or_default();
                     (
                         format!("{}{ms:.1}", if extrapolated { "≈" } else { "" }),
                         describe(c.overtakes, first, last),
@@ -323,10 +323,12 @@ pub fn equal_error_ms(at: &[(f32, f64)], error: f32) -> Option<(f64, bool)> {
     if e > highest.0 {
         return beyond(highest);
     }
+    if points.len() == 1 {
+        return Some((lowest.1.exp(), false));
+    }
     let i = points
         .partition_point(|p| p.0 < e)
-        .max(1)
-        .min(points.len() - 1);
+        .clamp(1, points.len() - 1);
     let (a, b) = (points[i - 1], points[i]);
     let t = if b.0 > a.0 {
         a.1 + (e - a.0) / (b.0 - a.0) * (b.1 - a.1)

@@ -86,6 +86,7 @@ fn report() -> Report {
             target_noise: 0.005,
             image_target_noise: 0.01,
             image_width: 16,
+            picture_width: 64,
             repeats: 1,
             seed: 7,
             scenes: vec!["bunny".into(), "human".into()],
@@ -337,17 +338,22 @@ fn parts_read_as_i_of_n_and_deal_scenes_round_robin() {
     assert!((0..5).all(|u| Part::WHOLE.holds(u)));
 }
 
-/// `report`'s data as part `index` of 2: the scenes part `index` holds.
+/// `report`'s data as part `index` of 2: the scenes part `index` holds,
+/// its atlas not yet judged.
 fn part_of(report: &Report, index: usize) -> Report {
     let part = Part::new(index, 2).unwrap();
-    let order: Vec<String> = report.settings.scenes.clone();
-    let holds = |scene: &str| part.holds(order.iter().position(|s| s == scene).unwrap());
+    let s = &report.settings;
+    let order: Vec<&String> = s.scenes.iter().chain(&s.atlas_scenes).collect();
+    let holds = |scene: &str| part.holds(order.iter().position(|s| *s == scene).unwrap());
     let mut r = report.clone();
     r.settings.part = part;
     r.references.retain(|x| holds(&x.scene));
     r.runs.retain(|x| holds(&x.result.scene));
     r.skipped.retain(|x| holds(&x.scene));
     r.failed.retain(|x| holds(&x.scene));
+    r.atlas
+        .retain(|x| holds(&x.scene) && x.remedy_for.is_none());
+    r.remedies.retain(|x| holds(&x.scene));
     r
 }
 
@@ -355,7 +361,16 @@ fn part_of(report: &Report, index: usize) -> Report {
 /// a part writes; a missing, doubled or foreign part is refused by name.
 #[test]
 fn parts_merge_into_the_whole_report() {
-    let whole = report();
+    let mut whole = report();
+    // thin-sheets (the third unit, part 1's) fails against the standard
+    // scenes of part 2 (human) and part 1 (bunny) alike.
+    let failing = atlas("hemi-raster", 0.2);
+    let spec = crate::methods::parse("hemi-raster:direct").unwrap();
+    let direct = atlas("hemi-raster:direct", 0.06).outcome;
+    whole.atlas = vec![failing.clone(), atlas("raytrace:4", 0.3)];
+    whole.remedies = vec![AtlasRun::remedy(&failing, &spec, direct)];
+    whole.judge_atlas();
+    assert_eq!(whole.atlas.len(), 3);
     let dir = tempfile::tempdir().unwrap();
     let mut parts = Vec::new();
     for index in [2, 1] {
@@ -374,6 +389,9 @@ fn parts_merge_into_the_whole_report() {
 
     let error = |parts: Vec<(String, Report)>| merge(parts).unwrap_err().to_string();
     assert!(error(parts[..1].to_vec()).contains("part 1/2 missing"));
+    let mut of_three = parts.clone();
+    of_three[1].1.settings.part = Part::new(3, 3).unwrap();
+    assert!(error(of_three).contains("part1 is part 3/3, part2 part 2 of 2"));
     let doubled = vec![parts[0].clone(), parts[0].clone()];
     assert!(error(doubled).contains("both part 2/2"));
     let mut foreign = parts.clone();
@@ -480,4 +498,29 @@ fn the_resolution_section_compares_with_the_ray_tracer_at_equal_error() {
         md.contains("On bunny, hemi-raster (7.35% per pixel) overtakes the ray tracer"),
         "{md}"
     );
+}
+
+/// JSON has no NaN: a non-finite error is written as null and read back
+/// as NaN, so a part whose method returned non-finite radiance merges.
+#[test]
+fn non_finite_errors_survive_a_part_file() {
+    let mut r = report();
+    r.runs[0].result.frames[0].vertex.relative_l2 = f32::NAN;
+    r.runs[0].result.frames[0].vertex.max = f32::INFINITY;
+    let dir = tempfile::tempdir().unwrap();
+    r.write_part(dir.path()).unwrap();
+    let read = Report::read(dir.path()).unwrap();
+    let vertex = read.runs[0].result.frames[0].vertex;
+    assert!(vertex.relative_l2.is_nan() && !vertex.max.is_finite());
+    assert_eq!(vertex.p50, r.runs[0].result.frames[0].vertex.p50);
+}
+
+#[test]
+fn one_ray_tracer_setting_reads_off_its_own_time() {
+    let (ms, beyond) = equal_error_ms(&[(0.1, 50.0)], 0.1).unwrap();
+    approx::assert_relative_eq!(ms, 50.0, max_relative = 1e-9);
+    assert!(!beyond);
+    let (ms, beyond) = equal_error_ms(&[(0.1, 50.0)], 0.05).unwrap();
+    approx::assert_relative_eq!(ms, 200.0, max_relative = 1e-5);
+    assert!(beyond);
 }
