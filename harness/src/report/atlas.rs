@@ -44,8 +44,8 @@ pub struct AtlasRun {
 }
 
 impl AtlasRun {
-    /// `spec`'s outcome on `scene`, not yet judged ([`judge`] writes its
-    /// diagnosis).
+    /// `spec`'s outcome on `scene`, not yet judged
+    /// ([`Report::judge_atlas`] writes its diagnosis).
     pub fn new(scene: &str, spec: &MethodSpec, outcome: Outcome) -> AtlasRun {
         AtlasRun {
             scene: scene.to_string(),

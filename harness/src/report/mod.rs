@@ -139,8 +139,10 @@ impl Report {
     }
 
     /// Judges the atlas's standard settings over every standard scene's
-    /// runs ([`atlas::judge`]): their diagnoses, and the best remedy after
-    /// each that fails.
+    /// runs: their diagnoses, and after each that fails
+    /// ([`AtlasRun::fails`]) the best of its remedies in
+    /// [`Report::remedies`]. Depends on nothing else, so a report merged
+    /// from parts judges as one run does.
     pub fn judge_atlas(&mut self) {
         self.atlas = atlas::judge(&self.atlas, &self.remedies, &self.runs);
     }
