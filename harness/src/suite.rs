@@ -57,8 +57,12 @@ fn specs(names: &[&str]) -> Vec<MethodSpec> {
 
 /// The scenes whose time per image the report measures across widths: the
 /// bunny's contact shadow (one still frame) and the skinned human (its
-/// first frame).
+/// first frame); the full suite adds [`FULL_SCALING_SCENES`].
 pub const SCALING_SCENES: [&str; 2] = ["bunny", "human"];
+
+/// What the full suite adds to [`SCALING_SCENES`]: the chess board, whose
+/// pieces cast on each other the shadows deferred shadowing is for.
+pub const FULL_SCALING_SCENES: [&str; 1] = ["chess"];
 
 /// The ray tracer's per-pixel settings timed across widths beside the
 /// families' standard settings: the curve of time against error that the
@@ -129,6 +133,15 @@ impl Suite {
         specs(&STRIP_SETTINGS)
     }
 
+    /// The scenes of the resolution study, where the suite runs them.
+    pub fn scaling_scenes(self) -> Vec<&'static str> {
+        let mut scenes = SCALING_SCENES.to_vec();
+        if self == Suite::Full {
+            scenes.extend(FULL_SCALING_SCENES);
+        }
+        scenes
+    }
+
     /// The image widths of the resolution study, in pixels.
     pub fn scaling_widths(self) -> &'static [u32] {
         match self {
@@ -138,7 +151,7 @@ impl Suite {
         }
     }
 
-    /// The settings the resolution study times on [`SCALING_SCENES`]: each
+    /// The settings the resolution study times on its scenes: each
     /// family's standard setting (the atlas's), and the ray tracer's
     /// per-pixel settings of the suite's sweep.
     pub fn scaling_settings(self) -> Vec<MethodSpec> {
@@ -303,6 +316,18 @@ mod tests {
                 let built = spec.build(&gpu);
                 assert!(built.is_ok(), "{spec}: {:?}", built.err());
             }
+        }
+    }
+
+    #[test]
+    fn the_full_suite_times_chess_across_widths_too() {
+        assert_eq!(Suite::Default.scaling_scenes(), SCALING_SCENES);
+        assert!(Suite::Full.scaling_scenes().contains(&"chess"));
+        let widths = Suite::Full.scaling_widths();
+        assert!(widths[0] <= 160 && *widths.last().unwrap() >= 2048);
+        for suite in [Suite::Quick, Suite::Default] {
+            let widths = suite.scaling_widths();
+            assert!(widths[0] <= 160 && *widths.last().unwrap() >= 1024);
         }
     }
 

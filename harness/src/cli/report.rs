@@ -195,6 +195,7 @@ fn plan(args: &ReportArgs, suite: Suite, methods: &Methods) -> Result<Plan> {
             target_noise: image.target_noise.map(|n| 3.0 * n),
             ..ReferenceSettings::PICTURE
         },
+        scaling_scenes: suite.scaling_scenes(),
         scaling_settings: suite.scaling_settings(),
         scaling_widths: suite.scaling_widths().to_vec(),
     })

@@ -21,7 +21,7 @@ use crate::{
     run::{self, References, RunResult},
     scaling::{self, ScalingRun},
     scenes::{self, SCENES, stress},
-    suite::{SCALING_SCENES, STRIP_SCENE, Suite, Sweep},
+    suite::{STRIP_SCENE, Suite, Sweep},
 };
 
 /// What a report runs, every name already checked.
@@ -52,8 +52,9 @@ pub struct Plan {
     /// ([`crate::pictures`]).
     pub picture_width: u32,
     pub picture: ReferenceSettings,
-    /// The settings timed across widths on [`SCALING_SCENES`], and the
-    /// widths.
+    /// The scenes timed across widths (where the plan runs them), the
+    /// settings timed and the widths.
+    pub scaling_scenes: Vec<&'static str>,
     pub scaling_settings: Vec<MethodSpec>,
     pub scaling_widths: Vec<u32>,
 }
@@ -254,7 +255,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
                 report.pictures.push(pictures);
             }
         }
-        if SCALING_SCENES.contains(&name) {
+        if plan.scaling_scenes.contains(&name) {
             overall.inc_length(plan.scaling_settings.len() as u64);
             for spec in &plan.scaling_settings {
                 overall.set_message(format!("{name}: {spec} across widths"));

@@ -121,8 +121,8 @@ pub struct Report {
     pub atlas: Vec<AtlasRun>,
     /// Every remedy that ran on a stress scene ([`AtlasRun::remedy`]).
     pub remedies: Vec<AtlasRun>,
-    /// Time per image across widths ([`crate::scaling`]) on the scenes of
-    /// [`crate::suite::SCALING_SCENES`] the report ran.
+    /// Time per image across widths ([`crate::scaling`]) on the suite's
+    /// scenes for it ([`Suite::scaling_scenes`]) the report ran.
     pub scaling: Vec<ScalingRun>,
     /// The pictures of the strip's scene ([`crate::suite::STRIP_SCENE`]) and
     /// of the stress scenes where a setting may fail, under `pictures/`.
