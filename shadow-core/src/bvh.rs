@@ -149,7 +149,7 @@ impl SceneBvh {
     pub fn unoccluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
         let ray = Ray::new(
             self.space.point(origin),
-            dir.into(),
+            positive_zeros(dir),
             0.0,
             t_max * self.space.scale,
         );
@@ -160,7 +160,7 @@ impl SceneBvh {
     /// The closest hit along the ray, if any.
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         let origin = self.space.point(origin);
-        let ray = Ray::new(origin, dir.into(), 0.0, t_max * self.space.scale);
+        let ray = Ray::new(origin, positive_zeros(dir), 0.0, t_max * self.space.scale);
         let mut hit = RayHit::none();
         if !self.bvh.ray_traverse(ray, &mut hit, |ray, slot| {
             self.triangles[slot].intersect(ray)
@@ -179,6 +179,15 @@ impl SceneBvh {
             barycentric: barycentric(point, v0, v1, v2),
         })
     }
+}
+
+/// `dir` with every −0.0 component made +0.0. obvhs 0.4's traversal misses
+/// every box along a ray whose direction has a negative zero (`-Vec3::Y`
+/// is (−0, −1, −0)): a ray straight down from above a floor found nothing.
+/// Adding +0.0 turns −0.0 into +0.0 and leaves every other value as it is.
+#[inline]
+fn positive_zeros(dir: Vec3) -> Vec3A {
+    Vec3A::from(dir) + Vec3A::ZERO
 }
 
 /// Barycentric weights of `p` (assumed in the triangle's plane).
@@ -245,6 +254,30 @@ mod tests {
             })
             .filter(|(_, t)| t.is_finite())
             .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    /// Rays along an axis, written with negative zeros as `-Vec3::Y` is,
+    /// hit what they point at.
+    #[test]
+    fn rays_with_negative_zero_components_hit() {
+        let floor = crate::shapes::floor("floor", Vec3::ZERO, 1.0, 1).unwrap();
+        let camera = Camera::new(Vec3::new(0.0, 1.0, 3.0), Vec3::ZERO, Vec3::Y, 1.0, 8, 8).unwrap();
+        let object = Object {
+            mesh: Arc::new(floor),
+            material: Brdf::lambert(Vec3::ONE).unwrap(),
+        };
+        let scene = Scene::still("floor", vec![object], camera).unwrap();
+        let bvh = SceneBvh::build(&scene.frame_geometry(0).unwrap()).unwrap();
+        let above = Vec3::new(-0.3, 1.0, -0.3);
+        for down in [
+            -Vec3::Y,
+            Vec3::new(0.0, -1.0, 0.0),
+            Vec3::new(-0.0, -1.0, 0.0),
+        ] {
+            let hit = bvh.closest_hit(above, down, 10.0).expect("the floor");
+            assert_relative_eq!(hit.t, 1.0, epsilon = 1e-6);
+            assert!(!bvh.unoccluded(above, down, 10.0));
+        }
     }
 
     #[test]
