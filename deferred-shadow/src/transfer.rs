@@ -30,7 +30,6 @@ use shadow_core::{
     Environment, FrameGeometry, Mesh, PosedObject, Result, ShTransfer, TangentSpace, TransferSpace,
     bvh::SceneBvh,
     qmc::{cosine_hemisphere, sobol2},
-    ray_origin,
     sh::{ShOrder, ShRgb, ShRotation, Window, Zonal, eval_basis, project_environment},
 };
 
@@ -78,7 +77,6 @@ impl Transfer {
             }],
         };
         let bvh = SceneBvh::build(&alone)?;
-        let offset = bvh.ray_offset();
         let n = order.coeff_count();
         let mut coefficients = vec![0.0f32; mesh.vertex_count() * n];
         let scale = PI / rays as f32;
@@ -89,13 +87,12 @@ impl Transfer {
                 let p = mesh.positions()[v];
                 let normal = mesh.normals()[v];
                 let tangents = TangentSpace::new(normal);
-                let origin = ray_origin(p, normal, offset);
                 let shift = vertex_shift(v as u32);
                 let mut basis = [0.0f32; 64];
                 for k in 0..rays {
                     let local = cosine_hemisphere(sobol2(k, shift));
                     let dir = tangents.to_world(local).normalize();
-                    if bvh.unoccluded(origin, dir, f32::INFINITY) {
+                    if bvh.unoccluded_from(p, normal, dir, f32::INFINITY) {
                         eval_basis(order, dir, &mut basis);
                         for (o, b) in out.iter_mut().zip(&basis) {
                             *o += b;

@@ -157,6 +157,73 @@ impl SceneBvh {
             .ray_traverse_miss(ray, |ray, slot| self.triangles[slot].intersect(ray))
     }
 
+    /// True when nothing blocks the direction `dir` (unit) from the surface
+    /// point `position` with unit `normal`, within `t_max`: the shadow ray
+    /// of every estimator that looks from a vertex.
+    ///
+    /// The ray starts at the point lifted along its normal by
+    /// [`SceneBvh::ray_offset`] (so that its own surface is behind it) and
+    /// backed up along the ray by half that (so that a surface through the
+    /// point, the floor under a box's edge, is in front of it: from the
+    /// lifted point alone, a ray from that edge downward meets the floor at
+    /// t = 0 and light leaks from under it). A hit nearer than the lift
+    /// counts only on a front face (counter-clockwise seen from the ray): at
+    /// a concave crease the backed-up origin lies behind the other face for
+    /// the rays that leave it, which must pass. A point pressed on another
+    /// surface ([`SceneBvh::pressed`]) is not handled here.
+    #[inline]
+    pub fn unoccluded_from(&self, position: Vec3, normal: Vec3, dir: Vec3, t_max: f32) -> bool {
+        let offset = self.ray_offset();
+        let origin = position + normal * offset - dir * (0.5 * offset);
+        self.misses_front_near(origin, dir, t_max + 0.5 * offset, offset)
+    }
+
+    /// Whether the surface point `position` with unit `normal` lies pressed
+    /// on another surface that faces it (a box's bottom face on the floor):
+    /// then it receives no light, though a shadow ray lifted along its
+    /// normal would start behind that surface and see the sky. Four probes,
+    /// each a lift from the point in the tangent plane (off the mesh's
+    /// edges through it), look along the normal from
+    /// half a lift behind the point for a front face within one and a half
+    /// lifts; the point is pressed when all four find one (so that a point
+    /// on the rim of a pressed region, half of whose probes miss, is not).
+    pub fn pressed(&self, position: Vec3, normal: Vec3) -> bool {
+        let offset = self.ray_offset();
+        let tangents = crate::TangentSpace::new(normal);
+        // Directions that avoid the axes, so that no probe runs along a
+        // mesh's edge.
+        let jitter = [(0.83, 0.31), (-0.29, 0.87), (-0.81, -0.37), (0.33, -0.79)];
+        jitter.iter().all(|&(u, v)| {
+            let side = tangents.tangent * u + tangents.bitangent * v;
+            let probe = position + side * offset - normal * (0.5 * offset);
+            !self.misses_front_near(probe, normal, 1.5 * offset, f32::INFINITY)
+        })
+    }
+
+    /// True when the ray from `origin` in unit direction `dir` meets no
+    /// triangle within `t_max` (world units), hits nearer than `near` only
+    /// counting on front faces.
+    fn misses_front_near(&self, origin: Vec3, dir: Vec3, t_max: f32, near: f32) -> bool {
+        let ray = Ray::new(
+            self.space.point(origin),
+            positive_zeros(dir),
+            0.0,
+            t_max * self.space.scale,
+        );
+        let near = near * self.space.scale;
+        let dir = Vec3A::from(dir);
+        self.bvh.ray_traverse_miss(ray, |ray, slot| {
+            let triangle = &self.triangles[slot];
+            let t = triangle.intersect(ray);
+            // The counter-clockwise normal is (v1 − v0) × (v2 − v0) = e2 × e1.
+            if t < near && triangle.e2.cross(triangle.e1).dot(dir) >= 0.0 {
+                f32::INFINITY
+            } else {
+                t
+            }
+        })
+    }
+
     /// The closest hit along the ray, if any.
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         let origin = self.space.point(origin);
@@ -278,6 +345,57 @@ mod tests {
             assert_relative_eq!(hit.t, 1.0, epsilon = 1e-6);
             assert!(!bvh.unoccluded(above, down, 10.0));
         }
+    }
+
+    /// A box standing on a floor: what a point where two surfaces meet
+    /// sees.
+    #[test]
+    fn shadow_rays_from_contacts_neither_leak_nor_block_what_leaves() {
+        let floor = crate::shapes::floor("floor", Vec3::ZERO, 1.0, 1).unwrap();
+        let cube = crate::shapes::cuboid(
+            "box",
+            Vec3::new(-0.3, 0.0, -0.3),
+            Vec3::new(0.3, 0.5, 0.3),
+            false,
+        )
+        .unwrap();
+        let camera = Camera::new(Vec3::new(0.0, 1.0, 3.0), Vec3::ZERO, Vec3::Y, 1.0, 8, 8).unwrap();
+        let objects = [floor, cube].map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: Brdf::lambert(Vec3::ONE).unwrap(),
+        });
+        let scene = Scene::still("contact", objects.to_vec(), camera).unwrap();
+        let bvh = SceneBvh::build(&scene.frame_geometry(0).unwrap()).unwrap();
+        let free = |p: Vec3, n: Vec3, d: Vec3| bvh.unoccluded_from(p, n, d.normalize(), 10.0);
+        // Where the box's −X side meets the floor: the floor blocks the lower
+        // half of its hemisphere, the sky the upper.
+        let edge = Vec3::new(-0.3, 0.0, 0.0);
+        assert!(!free(edge, -Vec3::X, Vec3::new(-1.0, -0.3, 0.2)));
+        assert!(free(edge, -Vec3::X, Vec3::new(-1.0, 0.3, 0.2)));
+        assert!(!bvh.pressed(edge, -Vec3::X));
+        // The floor beside the box: the box blocks toward it, the sky the
+        // rest, though the backed-up origin lies behind the box's side.
+        let foot = Vec3::new(-0.3, 0.0, 0.1);
+        assert!(!free(foot, Vec3::Y, Vec3::new(1.0, 0.4, 0.0)));
+        assert!(free(foot, Vec3::Y, Vec3::new(-1.0, 0.4, 0.0)));
+        assert!(free(foot, Vec3::Y, Vec3::new(-0.2, 1.0, 0.3)));
+        assert!(!bvh.pressed(foot, Vec3::Y));
+        // The box's bottom face lies pressed on the floor, at its corners
+        // too (two of them on the floor's diagonal); the floor under it is
+        // pressed by it.
+        for corner in [(-0.3, -0.3), (0.3, 0.3), (0.3, -0.3), (0.0, 0.1)] {
+            let p = Vec3::new(corner.0, 0.0, corner.1);
+            assert!(bvh.pressed(p, -Vec3::Y), "{p}");
+        }
+        assert!(bvh.pressed(Vec3::new(0.1, 0.0, 0.0), Vec3::Y));
+        // Away from contacts, as before.
+        let open = Vec3::new(0.8, 0.0, 0.8);
+        assert!(!bvh.pressed(open, Vec3::Y));
+        assert!(free(open, Vec3::Y, Vec3::new(0.1, 1.0, 0.0)));
+        assert!(!free(open, Vec3::Y, Vec3::new(-1.0, 0.5, -1.0)));
+        let top = Vec3::new(0.3, 0.5, 0.0);
+        assert!(!bvh.pressed(top, Vec3::X));
+        assert!(free(top, Vec3::X, Vec3::new(1.0, 0.5, 0.0)));
     }
 
     #[test]

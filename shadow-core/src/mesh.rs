@@ -63,6 +63,9 @@ impl Aabb {
     /// vertex (the Monte-Carlo reference, hemi-raster's receivers) lifts by
     /// this, so that all see from the same point: at a concave crease the
     /// faces that meet there do block part of the lifted point's hemisphere.
+    /// The reference's shadow rays also back up along the ray, so that a
+    /// surface through the point blocks too
+    /// ([`SceneBvh::unoccluded_from`](crate::bvh::SceneBvh::unoccluded_from)).
     pub fn ray_offset(&self) -> f32 {
         1e-4 * self.diagonal().max(f32::MIN_POSITIVE)
     }

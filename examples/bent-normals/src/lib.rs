@@ -9,7 +9,7 @@ use shadow_core::{
     TangentSpace, VertexRadiance,
     bvh::SceneBvh,
     name::{MethodName, NameWriter},
-    qmc, ray_origin,
+    qmc,
     sh::{self, ShOrder, ShRgb, Zonal},
     shading::lambert_radiance,
 };
@@ -116,7 +116,6 @@ impl ShadowMethod for BentNormals {
 
     fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         let bvh = SceneBvh::build(frame)?;
-        let offset = bvh.ray_offset();
         let vertices: Vec<(Vec3, Vec3)> = frame.vertices().collect();
         let rays = self.rays;
         self.occlusion = vertices
@@ -124,13 +123,15 @@ impl ShadowMethod for BentNormals {
             .enumerate()
             .map(|(i, &(p, n))| {
                 let tangent = TangentSpace::new(n);
-                let origin = ray_origin(p, n, offset);
+                if bvh.pressed(p, n) {
+                    return (0.0, n);
+                }
                 // A Sobol' set per vertex, shifted by a hash of its index.
                 let shift = [hash(2 * i as u32), hash(2 * i as u32 + 1)];
                 let (mut open, mut bent) = (0_u32, Vec3::ZERO);
                 for k in 0..rays {
                     let dir = tangent.to_world(qmc::cosine_hemisphere(qmc::sobol2(k, shift)));
-                    if bvh.unoccluded(origin, dir, f32::INFINITY) {
+                    if bvh.unoccluded_from(p, n, dir, f32::INFINITY) {
                         open += 1;
                         bent += dir;
                     }

@@ -63,15 +63,7 @@ impl RayTrace {
             .sampler
             .as_ref()
             .ok_or_else(|| Error::stage(&self.name, "shade before relight"))?;
-        Ok((
-            scene,
-            frame,
-            Estimator {
-                bvh,
-                sampler,
-                offset: bvh.ray_offset(),
-            },
-        ))
+        Ok((scene, frame, Estimator { bvh, sampler }))
     }
 }
 

@@ -35,7 +35,6 @@ use shadow_core::{
     bvh::SceneBvh,
     environment::EnvironmentSampler,
     qmc::{cosine_hemisphere, sobol2},
-    ray_origin,
 };
 
 /// A point to shade: where, which way the surface faces, toward whom, with what.
@@ -95,20 +94,26 @@ impl Accumulator {
 pub struct Estimator<'a> {
     pub bvh: &'a SceneBvh,
     pub sampler: &'a EnvironmentSampler,
-    /// Shadow rays start at `x + offset·n` (see [`SceneBvh::ray_offset`]).
-    pub offset: f32,
 }
 
 impl Estimator<'_> {
     /// One replicate of `size` MIS iterations at `point`, its digital shifts
     /// drawn from `rng`; returns the replicate's mean and the number of shadow
-    /// rays traced (directions with zero integrand cast none).
+    /// rays traced (directions with zero integrand cast none). Shadow rays
+    /// are [`SceneBvh::unoccluded_from`]'s; a point pressed on another
+    /// surface ([`SceneBvh::pressed`]) receives nothing.
     pub fn replicate(&self, point: &ShadingPoint, rng: &mut Pcg32, size: u32) -> (Vec3, u64) {
         let n = point.normal;
         let tangents = TangentSpace::new(n);
-        let origin = ray_origin(point.position, n, self.offset);
         let cosine_shift = [rng.next_u32(), rng.next_u32()];
         let env_shift = [rng.next_u32(), rng.next_u32()];
+        if self.bvh.pressed(point.position, n) {
+            return (Vec3::ZERO, 0);
+        }
+        let free = |dir| {
+            self.bvh
+                .unoccluded_from(point.position, n, dir, f32::INFINITY)
+        };
         let mut rays = 0u64;
         let mut sum = Vec3::ZERO;
         for i in 0..size {
@@ -122,7 +127,7 @@ impl Estimator<'_> {
                     let f = le * point.material.eval(n, w, point.view) * cos;
                     if f != Vec3::ZERO {
                         rays += 1;
-                        if self.bvh.unoccluded(origin, w, f32::INFINITY) {
+                        if free(w) {
                             sum += f / (cos * FRAC_1_PI + pdf_env);
                         }
                     }
@@ -136,7 +141,7 @@ impl Estimator<'_> {
                 let f = s.radiance * point.material.eval(n, s.dir, point.view) * cos;
                 if f != Vec3::ZERO {
                     rays += 1;
-                    if self.bvh.unoccluded(origin, s.dir, f32::INFINITY) {
+                    if free(s.dir) {
                         sum += f / (s.pdf + cos * FRAC_1_PI);
                     }
                 }

@@ -328,7 +328,6 @@ impl Setup {
         Estimator {
             bvh: &self.bvh,
             sampler: &self.sampler,
-            offset: self.bvh.ray_offset(),
         }
     }
 }

@@ -18,9 +18,10 @@
 //! the smooth factor Y_k is integrated almost exactly and the noise comes from
 //! the visibility edges; replicates with independent shifts are independent,
 //! and the spread of their means is an honest standard error per coefficient.
-//! Vertex normals and ray origins (lifted by [`SceneBvh::ray_offset`] along the
-//! normal) are those of the radiance reference, so the two references see the
-//! same visibility, self-shadowing by neighbouring faces included.
+//! Vertex normals and shadow rays ([`SceneBvh::unoccluded_from`], and a
+//! vertex pressed on another surface unlit, [`SceneBvh::pressed`]) are those
+//! of the radiance reference, so the two references see the same
+//! visibility, self-shadowing by neighbouring faces and contacts included.
 
 use std::{f64::consts::PI, time::Instant};
 
@@ -31,7 +32,6 @@ use rayon::prelude::*;
 use shadow_core::{
     Error, FrameGeometry, Result, Scene, TangentSpace,
     bvh::SceneBvh,
-    ray_origin,
     sh::{ShOrder, eval_basis},
 };
 
@@ -165,7 +165,6 @@ pub fn transfer_reference(
     settings.validate()?;
     let start = Instant::now();
     let bvh = SceneBvh::build(frame)?;
-    let offset = bvh.ray_offset();
     let points: Vec<(Vec3, Vec3)> = frame.vertices().collect();
     let n = settings.order.coeff_count();
     let mut mean = vec![0.0; points.len() * n];
@@ -179,8 +178,7 @@ pub fn transfer_reference(
         .map_init(
             || Scratch::new(n),
             |scratch, (v, ((mean, se), &(position, normal)))| {
-                let origin = ray_origin(position, normal, offset);
-                let rays = vertex_transfer(&bvh, origin, normal, v, settings, scratch);
+                let rays = vertex_transfer(&bvh, position, normal, v, settings, scratch);
                 let r = settings.replicates as f64;
                 for ((m, e), (&s, &s2)) in mean
                     .iter_mut()
@@ -211,7 +209,7 @@ pub fn transfer_reference(
 /// rays traced.
 fn vertex_transfer(
     bvh: &SceneBvh,
-    origin: Vec3,
+    position: Vec3,
     normal: Vec3,
     v: usize,
     settings: &TransferSettings,
@@ -221,6 +219,9 @@ fn vertex_transfer(
     let weight = PI / settings.replicate_size as f64;
     scratch.sum.fill(0.0);
     scratch.sum_sq.fill(0.0);
+    if bvh.pressed(position, normal) {
+        return 0;
+    }
     for r in 0..settings.replicates {
         let mut rng = stream(settings.seed, v, r);
         let shift = [rng.next_u32(), rng.next_u32()];
@@ -228,7 +229,7 @@ fn vertex_transfer(
         for i in 0..settings.replicate_size {
             let local = cosine_hemisphere(sobol2(i, shift));
             let dir = tangents.to_world(local);
-            if bvh.unoccluded(origin, dir, f32::INFINITY) {
+            if bvh.unoccluded_from(position, normal, dir, f32::INFINITY) {
                 eval_basis(settings.order, dir, &mut scratch.basis);
                 for (acc, &y) in scratch.replicate.iter_mut().zip(&scratch.basis) {
                     *acc += y as f64;
