@@ -86,6 +86,7 @@ fn glossy_furnace_at_normal_view_reflects_diffuse_plus_specular() {
         normal: Vec3::Y,
         view: Vec3::Y,
         material,
+        object: 0,
     };
     let est = reference::estimate(
         &[point],

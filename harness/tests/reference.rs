@@ -166,6 +166,7 @@ fn centre_of_a_closed_box_is_black() {
         normal: Vec3::Y,
         view: Vec3::Y,
         material: white(0.8),
+        object: 0,
     };
     let est = reference::estimate(
         &[point],

@@ -178,16 +178,18 @@ impl SceneBvh {
         self.misses_front_near(origin, dir, t_max + 0.5 * offset, offset)
     }
 
-    /// Whether the surface point `position` with unit `normal` lies pressed
-    /// on another surface that faces it (a box's bottom face on the floor):
-    /// then it receives no light, though a shadow ray lifted along its
-    /// normal would start behind that surface and see the sky. Four probes,
-    /// each a lift from the point in the tangent plane (off the mesh's
-    /// edges through it), look along the normal from
-    /// half a lift behind the point for a front face within one and a half
-    /// lifts; the point is pressed when all four find one (so that a point
-    /// on the rim of a pressed region, half of whose probes miss, is not).
-    pub fn pressed(&self, position: Vec3, normal: Vec3) -> bool {
+    /// Whether the surface point `position` with unit `normal`, on object
+    /// `object` of the frame, lies pressed on another object's surface (a
+    /// box's bottom face on the floor, a ball's pole): then it receives no
+    /// light, though a shadow ray lifted along its normal would start behind
+    /// that surface and see the sky. Four probes, each a lift from the point
+    /// in the tangent plane (off the mesh's edges through it), look along
+    /// the normal from half a lift behind the point for another object's
+    /// surface within one and a half lifts, either side (surfaces are
+    /// two-sided); the point is pressed when all four find one (so that a
+    /// point on the rim of a pressed region, half of whose probes miss, is
+    /// not). The point's own object never presses it.
+    pub fn pressed(&self, position: Vec3, normal: Vec3, object: u32) -> bool {
         let offset = self.ray_offset();
         let tangents = crate::TangentSpace::new(normal);
         // Directions that avoid the axes, so that no probe runs along a
@@ -196,7 +198,19 @@ impl SceneBvh {
         jitter.iter().all(|&(u, v)| {
             let side = tangents.tangent * u + tangents.bitangent * v;
             let probe = position + side * offset - normal * (0.5 * offset);
-            !self.misses_front_near(probe, normal, 1.5 * offset, f32::INFINITY)
+            let ray = Ray::new(
+                self.space.point(probe),
+                positive_zeros(normal),
+                0.0,
+                1.5 * offset * self.space.scale,
+            );
+            !self.bvh.ray_traverse_miss(ray, |ray, slot| {
+                if self.ids[slot].0 == object {
+                    f32::INFINITY
+                } else {
+                    self.triangles[slot].intersect(ray)
+                }
+            })
         })
     }
 
@@ -372,29 +386,32 @@ mod tests {
         let edge = Vec3::new(-0.3, 0.0, 0.0);
         assert!(!free(edge, -Vec3::X, Vec3::new(-1.0, -0.3, 0.2)));
         assert!(free(edge, -Vec3::X, Vec3::new(-1.0, 0.3, 0.2)));
-        assert!(!bvh.pressed(edge, -Vec3::X));
+        assert!(!bvh.pressed(edge, -Vec3::X, 1));
         // The floor beside the box: the box blocks toward it, the sky the
         // rest, though the backed-up origin lies behind the box's side.
         let foot = Vec3::new(-0.3, 0.0, 0.1);
         assert!(!free(foot, Vec3::Y, Vec3::new(1.0, 0.4, 0.0)));
         assert!(free(foot, Vec3::Y, Vec3::new(-1.0, 0.4, 0.0)));
         assert!(free(foot, Vec3::Y, Vec3::new(-0.2, 1.0, 0.3)));
-        assert!(!bvh.pressed(foot, Vec3::Y));
+        assert!(!bvh.pressed(foot, Vec3::Y, 0));
         // The box's bottom face lies pressed on the floor, at its corners
         // too (two of them on the floor's diagonal); the floor under it is
         // pressed by it.
         for corner in [(-0.3, -0.3), (0.3, 0.3), (0.3, -0.3), (0.0, 0.1)] {
             let p = Vec3::new(corner.0, 0.0, corner.1);
-            assert!(bvh.pressed(p, -Vec3::Y), "{p}");
+            assert!(bvh.pressed(p, -Vec3::Y, 1), "{p}");
         }
-        assert!(bvh.pressed(Vec3::new(0.1, 0.0, 0.0), Vec3::Y));
+        assert!(bvh.pressed(Vec3::new(0.1, 0.0, 0.0), Vec3::Y, 0));
         // Away from contacts, as before.
         let open = Vec3::new(0.8, 0.0, 0.8);
-        assert!(!bvh.pressed(open, Vec3::Y));
+        assert!(!bvh.pressed(open, Vec3::Y, 0));
         assert!(free(open, Vec3::Y, Vec3::new(0.1, 1.0, 0.0)));
         assert!(!free(open, Vec3::Y, Vec3::new(-1.0, 0.5, -1.0)));
         let top = Vec3::new(0.3, 0.5, 0.0);
-        assert!(!bvh.pressed(top, Vec3::X));
+        assert!(!bvh.pressed(top, Vec3::X, 1));
+        // A face is never pressed by its own object, from either side: the
+        // box's side seen from inside it.
+        assert!(!bvh.pressed(Vec3::new(0.3, 0.25, 0.0), -Vec3::X, 1));
         assert!(free(top, Vec3::X, Vec3::new(1.0, 0.5, 0.0)));
     }
 

@@ -213,11 +213,16 @@ impl FrameGeometry {
     /// Every vertex's world position and unit normal, the objects' vertices
     /// one after another: the flat order of per-vertex buffers.
     pub fn vertices(&self) -> impl Iterator<Item = (Vec3, Vec3)> + '_ {
-        self.objects.iter().flat_map(|o| {
+        self.object_vertices().map(|(_, p, n)| (p, n))
+    }
+
+    /// Every vertex as (object index, position, normal), objects in order.
+    pub fn object_vertices(&self) -> impl Iterator<Item = (u32, Vec3, Vec3)> + '_ {
+        self.objects.iter().enumerate().flat_map(|(i, o)| {
             o.positions()
                 .iter()
-                .copied()
-                .zip(o.normals().iter().copied())
+                .zip(o.normals())
+                .map(move |(&p, &n)| (i as u32, p, n))
         })
     }
 }

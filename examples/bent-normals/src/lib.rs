@@ -116,14 +116,15 @@ impl ShadowMethod for BentNormals {
 
     fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         let bvh = SceneBvh::build(frame)?;
-        let vertices: Vec<(Vec3, Vec3)> = frame.vertices().collect();
+        let vertices: Vec<(Vec3, Vec3, u32)> =
+            frame.object_vertices().map(|(o, p, n)| (p, n, o)).collect();
         let rays = self.rays;
         self.occlusion = vertices
             .par_iter()
             .enumerate()
-            .map(|(i, &(p, n))| {
+            .map(|(i, &(p, n, object))| {
                 let tangent = TangentSpace::new(n);
-                if bvh.pressed(p, n) {
+                if bvh.pressed(p, n, object) {
                     return (0.0, n);
                 }
                 // A Sobol' set per vertex, shifted by a hash of its index.

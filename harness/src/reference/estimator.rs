@@ -46,6 +46,9 @@ pub struct ShadingPoint {
     /// Unit direction from the point toward the viewer.
     pub view: Vec3,
     pub material: Brdf,
+    /// The frame's object the point lies on (its own surfaces never press
+    /// it: [`SceneBvh::pressed`]).
+    pub object: u32,
 }
 
 /// Running sums of replicate means, per channel, in f64.
@@ -107,7 +110,7 @@ impl Estimator<'_> {
         let tangents = TangentSpace::new(n);
         let cosine_shift = [rng.next_u32(), rng.next_u32()];
         let env_shift = [rng.next_u32(), rng.next_u32()];
-        if self.bvh.pressed(point.position, n) {
+        if self.bvh.pressed(point.position, n, point.object) {
             return (Vec3::ZERO, 0);
         }
         let free = |dir| {

@@ -246,7 +246,8 @@ pub fn vertex_points(scene: &Scene, frame: &FrameGeometry, eye: Vec3) -> Vec<Sha
         .objects
         .iter()
         .zip(scene.objects())
-        .flat_map(|(posed, object)| {
+        .enumerate()
+        .flat_map(|(index, (posed, object))| {
             posed
                 .positions()
                 .iter()
@@ -256,6 +257,7 @@ pub fn vertex_points(scene: &Scene, frame: &FrameGeometry, eye: Vec3) -> Vec<Sha
                     normal,
                     view: (eye - position).normalize_or(normal),
                     material: object.material,
+                    object: index as u32,
                 })
         })
         .collect()
@@ -293,6 +295,7 @@ pub fn pixel_points(
                 normal,
                 view: -dir,
                 material: scene.objects()[hit.object as usize].material,
+                object: hit.object,
             })
         })
         .collect()

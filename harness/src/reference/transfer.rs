@@ -165,7 +165,8 @@ pub fn transfer_reference(
     settings.validate()?;
     let start = Instant::now();
     let bvh = SceneBvh::build(frame)?;
-    let points: Vec<(Vec3, Vec3)> = frame.vertices().collect();
+    let points: Vec<(Vec3, Vec3, u32)> =
+        frame.object_vertices().map(|(o, p, n)| (p, n, o)).collect();
     let n = settings.order.coeff_count();
     let mut mean = vec![0.0; points.len() * n];
     let mut std_error = vec![0.0; points.len() * n];
@@ -177,8 +178,8 @@ pub fn transfer_reference(
         .enumerate()
         .map_init(
             || Scratch::new(n),
-            |scratch, (v, ((mean, se), &(position, normal)))| {
-                let rays = vertex_transfer(&bvh, position, normal, v, settings, scratch);
+            |scratch, (v, ((mean, se), &(position, normal, object)))| {
+                let rays = vertex_transfer(&bvh, (position, normal, object), v, settings, scratch);
                 let r = settings.replicates as f64;
                 for ((m, e), (&s, &s2)) in mean
                     .iter_mut()
@@ -209,8 +210,7 @@ pub fn transfer_reference(
 /// rays traced.
 fn vertex_transfer(
     bvh: &SceneBvh,
-    position: Vec3,
-    normal: Vec3,
+    (position, normal, object): (Vec3, Vec3, u32),
     v: usize,
     settings: &TransferSettings,
     scratch: &mut Scratch,
@@ -219,7 +219,7 @@ fn vertex_transfer(
     let weight = PI / settings.replicate_size as f64;
     scratch.sum.fill(0.0);
     scratch.sum_sq.fill(0.0);
-    if bvh.pressed(position, normal) {
+    if bvh.pressed(position, normal, object) {
         return 0;
     }
     for r in 0..settings.replicates {
