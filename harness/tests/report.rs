@@ -408,22 +408,20 @@ fn two_parts_merge_into_one_runs_tables() {
         csv_timings_aside(&read(&whole, "report.csv")),
         csv_timings_aside(&read(&merged, "report.csv"))
     );
-    // The atlas's tables carry no timings: the same text.
-    let atlas = |dir: &Path| {
+    // The strip's pictures and the atlas's tables carry no timings: the
+    // same text.
+    let section = |dir: &Path, from: &str, to: &str| {
         let md = read(dir, "report.md");
-        let start = md.find("## Stability atlas").expect("an atlas");
-        let end = md[start..].find("## Reproducibility").unwrap() + start;
+        let start = md.find(from).unwrap_or_else(|| panic!("no {from}"));
+        let end = md[start..].find(to).unwrap() + start;
         md[start..end].to_string()
     };
-    assert_eq!(atlas(&whole), atlas(&merged));
-    // And so are the strip's pictures.
-    let strip = |dir: &Path| {
-        let md = read(dir, "report.md");
-        let start = md.find("## Per pixel against per vertex").expect("a strip");
-        let end = md[start..].find("## Stability atlas").unwrap() + start;
-        md[start..end].to_string()
-    };
-    assert_eq!(strip(&whole), strip(&merged));
+    for (from, to) in [
+        ("## Per pixel against per vertex", "## Stability atlas"),
+        ("## Stability atlas", "## Reproducibility"),
+    ] {
+        assert_eq!(section(&whole, from, to), section(&merged, from, to));
+    }
     // Every image the page shows was brought over from the parts.
     let md = read(&merged, "report.md");
     for path in md.split("](").skip(1).filter_map(|s| s.split(')').next()) {

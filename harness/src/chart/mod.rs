@@ -196,7 +196,7 @@ impl Chart for Scatter<'_> {
                 )
             }))?;
         }
-        draw_legend(&mut chart)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 16)?;
         root.present()?;
         Ok(())
     }
@@ -308,7 +308,7 @@ impl Chart for Pareto<'_> {
         let (x, y) = curve_ranges(self.curves.iter(), self.noise_percent);
         let mut chart = log_log(&root, self.axes, x, y)?;
         plot_curves(&mut chart, self.curves, self.noise_percent, x, y)?;
-        draw_legend(&mut chart)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 16)?;
         root.present()?;
         Ok(())
     }
@@ -501,16 +501,20 @@ impl Chart for Grid<'_> {
 }
 
 /// The legend of a log-log chart, in its upper right corner.
-fn draw_legend<'a, DB: DrawingBackend + 'a>(chart: &mut ChartContext<'a, DB, LogLog>) -> Drawn
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    font_size: u32,
+) -> Drawn
 where
     DB::ErrorType: 'static,
 {
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
+        .position(position)
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 16))
+        .label_font(("sans-serif", font_size))
         .draw()?;
     Ok(())
 }

@@ -10,7 +10,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use shadow_core::Result;
 
-use super::{Chart, Drawn, bounds, register_font, write_chart};
+use super::{Chart, Drawn, bounds, draw_legend, register_font, write_chart};
 
 /// One setting's times across widths.
 #[derive(Clone, Debug)]
@@ -134,13 +134,7 @@ impl Chart for Panels<'_> {
                 }))?;
                 chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .background_style(WHITE.mix(0.9))
-                .border_style(BLACK.mix(0.3))
-                .label_font(("sans-serif", 14))
-                .draw()?;
+            draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
         }
         root.present()?;
         Ok(())

@@ -70,7 +70,7 @@ impl ReferenceSettings {
     /// images' pixels and are for the eye and the error maps (whose scale
     /// starts at 0.1%). On a 2-thread EPYC the bunny's 512 × 384 picture
     /// took 24 s at 2% and 14 s at 3%; on the small stress scenes the
-    /// first round (4 replicates a pixel), not the target, sets the cost,
+    /// first round (4 replicates a pixel), not the noise asked for, sets the cost,
     /// which replicates of 32 instead of 64 halve (16 made the bunny's
     /// 71 s).
     pub const PICTURE: ReferenceSettings = ReferenceSettings {

@@ -30,6 +30,16 @@ pub enum Outcome {
     Refused(String),
 }
 
+impl Outcome {
+    /// The run, if the method ran.
+    pub fn ran(&self) -> Option<&RunResult> {
+        match self {
+            Outcome::Ran(run) => Some(run),
+            Outcome::Refused(_) => None,
+        }
+    }
+}
+
 /// One method on one stress scene.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct AtlasRun {
@@ -100,10 +110,7 @@ impl AtlasRun {
     }
 
     fn mean_error(&self) -> Option<f32> {
-        match &self.outcome {
-            Outcome::Ran(run) => Some(run.mean_error()),
-            Outcome::Refused(_) => None,
-        }
+        self.outcome.ran().map(RunResult::mean_error)
     }
 
     /// Whether the setting failed on its scene: non-finite radiance, or a

@@ -131,9 +131,9 @@ impl SceneReferences {
 /// written (an image folder that cannot be written).
 pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Report> {
     let cache = ReferenceCache::new(&plan.cache);
-    let mut report = Report {
-        machine: MachineInfo::detect(None),
-        settings: Settings {
+    let mut report = Report::new(
+        MachineInfo::detect(None),
+        Settings {
             suite: plan.suite,
             target_noise: plan.vertex.target_noise.unwrap_or(0.0),
             image_target_noise: plan.image.target_noise.unwrap_or(0.0),
@@ -145,18 +145,8 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             atlas_scenes: plan.atlas_scenes.iter().map(|s| s.to_string()).collect(),
             part: plan.part,
         },
-        references: Vec::new(),
-        families: plan.sweeps.iter().map(Into::into).collect(),
-        runs: Vec::new(),
-        skipped: Vec::new(),
-        failed: Vec::new(),
-        atlas_scenes: Vec::new(),
-        atlas: Vec::new(),
-        remedies: Vec::new(),
-        scaling: Vec::new(),
-        pictures: Vec::new(),
-        merged_from: Vec::new(),
-    };
+        plan.sweeps.iter().map(Into::into).collect(),
+    );
     let overall = progress.runs(plan.run_count());
     let failed = |report: &mut Report, method: &str, scene: &str, error: &Error| {
         progress.say(format!("{scene}: {method} failed: {error}"));
@@ -244,16 +234,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
                 references: &references,
             };
             let taken = take_pictures(&view, &shown, &specs, plan, gpu, &cache, progress)?;
-            if let Some(pictures) = taken {
-                for f in &pictures.failed {
-                    progress.say(format!("{name}: no picture of {}: {}", f.setting, f.why));
-                }
-                progress.say(format!(
-                    "{name:<10} pictures: reference {:.1} s",
-                    pictures.reference_seconds
-                ));
-                report.pictures.push(pictures);
-            }
+            report.pictures.extend(taken);
         }
         if plan.scaling_scenes.contains(&name) {
             overall.inc_length(plan.scaling_settings.len() as u64);
@@ -330,10 +311,7 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
         }
         let shown: Vec<&RunResult> = may_fail
             .iter()
-            .filter_map(|&i| match &report.atlas[i].outcome {
-                Outcome::Ran(r) => Some(r.as_ref()),
-                Outcome::Refused(_) => None,
-            })
+            .filter_map(|&i| report.atlas[i].outcome.ran())
             .collect();
         if !shown.is_empty() {
             overall.set_message(format!("{name}: pictures"));
@@ -344,25 +322,13 @@ pub fn collect(plan: &Plan, gpu: &SharedGpu, progress: &Progress) -> Result<Repo
             };
             let specs: Vec<&MethodSpec> = pictured.iter().collect();
             let taken = take_pictures(&view, &shown, &specs, plan, gpu, &cache, progress)?;
-            if let Some(pictures) = taken {
-                for f in &pictures.failed {
-                    progress.say(format!("{name}: no picture of {}: {}", f.setting, f.why));
-                }
-                progress.say(format!(
-                    "{name:<10} pictures: reference {:.1} s",
-                    pictures.reference_seconds
-                ));
-                report.pictures.push(pictures);
-            }
+            report.pictures.extend(taken);
         }
         if let (Some(dir), Some(reference)) = (&plan.images, references.image.last()) {
             let runs: Vec<&RunResult> = report.atlas[first.0..]
                 .iter()
                 .chain(&report.remedies[first.1..])
-                .filter_map(|a| match &a.outcome {
-                    Outcome::Ran(r) => Some(r.as_ref()),
-                    Outcome::Refused(_) => None,
-                })
+                .filter_map(|a| a.outcome.ran())
                 .collect();
             images::write_scene(dir, name, &reference.image, &runs)?;
         }
@@ -447,8 +413,17 @@ fn take_pictures(
         width: plan.picture_width,
         reference: &plan.picture,
     };
-    let folder = format!("pictures/{}", view.scene.name());
-    pictures::take(&shot, specs, gpu, cache, &plan.out_dir, &folder, progress).map(Some)
+    let name = view.scene.name();
+    let folder = format!("pictures/{name}");
+    let pictures = pictures::take(&shot, specs, gpu, cache, &plan.out_dir, &folder, progress)?;
+    for f in &pictures.failed {
+        progress.say(format!("{name}: no picture of {}: {}", f.setting, f.why));
+    }
+    progress.say(format!(
+        "{name:<10} pictures: reference {:.1} s",
+        pictures.reference_seconds
+    ));
+    Ok(Some(pictures))
 }
 
 /// `spec` on a stress scene: its run, or why it could not run.

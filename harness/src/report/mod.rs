@@ -138,6 +138,26 @@ impl Report {
         self.references.iter().map(|r| r.scene.as_str()).collect()
     }
 
+    /// A report of nothing yet: `settings` run on `machine`, over the sweeps
+    /// of `families`.
+    pub fn new(machine: MachineInfo, settings: Settings, families: Vec<FamilySweep>) -> Report {
+        Report {
+            machine,
+            settings,
+            references: Vec::new(),
+            families,
+            runs: Vec::new(),
+            skipped: Vec::new(),
+            failed: Vec::new(),
+            atlas_scenes: Vec::new(),
+            atlas: Vec::new(),
+            remedies: Vec::new(),
+            scaling: Vec::new(),
+            pictures: Vec::new(),
+            merged_from: Vec::new(),
+        }
+    }
+
     /// Judges the atlas's standard settings over every standard scene's
     /// runs: their diagnoses, and after each that fails
     /// ([`AtlasRun::fails`]) the best of its remedies in

@@ -163,24 +163,15 @@ pub fn merge(parts: Vec<(String, Report)>) -> Result<Report> {
         .cloned()
         .collect();
     let unit = |scene: &str| order.iter().position(|s| s == scene).unwrap_or(order.len());
-    let mut merged = Report {
-        machine: parts[0].machine.clone(),
-        settings: Settings {
+    let mut merged = Report::new(
+        parts[0].machine.clone(),
+        Settings {
             part: Part::WHOLE,
             ..parts[0].settings.clone()
         },
-        references: Vec::new(),
-        families: parts[0].families.clone(),
-        runs: Vec::new(),
-        skipped: Vec::new(),
-        failed: Vec::new(),
-        atlas_scenes: Vec::new(),
-        atlas: Vec::new(),
-        remedies: Vec::new(),
-        scaling: Vec::new(),
-        pictures: Vec::new(),
-        merged_from: parts.iter().map(|r| r.machine.clone()).collect(),
-    };
+        parts[0].families.clone(),
+    );
+    merged.merged_from = parts.iter().map(|r| r.machine.clone()).collect();
     if merged.machine.adapter.is_none() {
         merged.machine.adapter = parts.iter().find_map(|r| r.machine.adapter.clone());
     }

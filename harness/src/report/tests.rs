@@ -293,10 +293,10 @@ fn failing_atlas_settings_get_their_best_remedy() {
     assert!(AtlasRun::best_remedy(&failing, &[elsewhere]).is_none());
 }
 
-/// Judging diagnoses every standard setting, puts the best remedy after
-/// each failing one only, and gives the same atlas when judged again.
-#[test]
-fn judging_the_atlas_places_remedies_after_failing_settings_only() {
+/// [`report`] with thin-sheets in its atlas: `hemi-raster` failing (20%)
+/// with `hemi-raster:direct` (6%) tried as its remedy, and `raytrace:4`;
+/// judged.
+fn with_failing_atlas() -> Report {
     let mut report = report();
     let failing = atlas("hemi-raster", 0.2);
     let spec = crate::methods::parse("hemi-raster:direct").unwrap();
@@ -304,6 +304,14 @@ fn judging_the_atlas_places_remedies_after_failing_settings_only() {
     report.atlas = vec![failing.clone(), atlas("raytrace:4", 0.3)];
     report.remedies = vec![AtlasRun::remedy(&failing, &spec, direct)];
     report.judge_atlas();
+    report
+}
+
+/// Judging diagnoses every standard setting, puts the best remedy after
+/// each failing one only, and gives the same atlas when judged again.
+#[test]
+fn judging_the_atlas_places_remedies_after_failing_settings_only() {
+    let mut report = with_failing_atlas();
     let settings: Vec<(&str, Option<&str>)> = report
         .atlas
         .iter()
@@ -361,15 +369,9 @@ fn part_of(report: &Report, index: usize) -> Report {
 /// a part writes; a missing, doubled or foreign part is refused by name.
 #[test]
 fn parts_merge_into_the_whole_report() {
-    let mut whole = report();
     // thin-sheets (the third unit, part 1's) fails against the standard
     // scenes of part 2 (human) and part 1 (bunny) alike.
-    let failing = atlas("hemi-raster", 0.2);
-    let spec = crate::methods::parse("hemi-raster:direct").unwrap();
-    let direct = atlas("hemi-raster:direct", 0.06).outcome;
-    whole.atlas = vec![failing.clone(), atlas("raytrace:4", 0.3)];
-    whole.remedies = vec![AtlasRun::remedy(&failing, &spec, direct)];
-    whole.judge_atlas();
+    let whole = with_failing_atlas();
     assert_eq!(whole.atlas.len(), 3);
     let dir = tempfile::tempdir().unwrap();
     let mut parts = Vec::new();
