@@ -79,22 +79,20 @@ fn report() -> Report {
             cached: true,
         }),
     };
+    let settings = Settings {
+        suite,
+        target_noise: 0.005,
+        image_target_noise: 0.01,
+        image_width: 16,
+        picture_width: 64,
+        repeats: 1,
+        seed: 7,
+        scenes: vec!["bunny".into(), "human".into()],
+        atlas_scenes: vec!["thin-sheets".into()],
+        part: Part::WHOLE,
+    };
     Report {
-        machine: MachineInfo::detect(Some("llvmpipe (LLVM 15.0.7, 256 bits)".into())),
-        settings: Settings {
-            suite,
-            target_noise: 0.005,
-            image_target_noise: 0.01,
-            image_width: 16,
-            picture_width: 64,
-            repeats: 1,
-            seed: 7,
-            scenes: vec!["bunny".into(), "human".into()],
-            atlas_scenes: vec!["thin-sheets".into()],
-            part: Part::WHOLE,
-        },
         references: vec![reference("bunny"), reference("human")],
-        families: suite.families().iter().map(Into::into).collect(),
         runs: vec![
             run("bunny", RAY_TRACER, "raytrace:4", 0.2, 3.0),
             run("bunny", RAY_TRACER, "raytrace:16", 0.1, 12.0),
@@ -112,12 +110,11 @@ fn report() -> Report {
             scene: "human".into(),
             why: "GPU: device lost".into(),
         }],
-        atlas_scenes: Vec::new(),
-        atlas: Vec::new(),
-        remedies: Vec::new(),
-        scaling: Vec::new(),
-        pictures: Vec::new(),
-        merged_from: Vec::new(),
+        ..Report::new(
+            MachineInfo::detect(Some("llvmpipe (LLVM 15.0.7, 256 bits)".into())),
+            settings,
+            suite.families().iter().map(Into::into).collect(),
+        )
     }
 }
 
