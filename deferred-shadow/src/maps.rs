@@ -1,28 +1,40 @@
-//! Which occlusion maps a frame needs, where each lies and how much it is
-//! blurred (§4.2.2, eq. 5–6), planned on the CPU; the GPU renders and blurs
-//! them (`gpu/map_pass.rs`).
+//! Which occlusion maps a frame needs, where each lies and how far its
+//! occluder stands from its receiver, planned on the CPU; the GPU renders
+//! and filters them (`gpu/map_pass.rs`).
 //!
 //! For light i, occluder group A and receiver B, A's shadow is projected
-//! along ω_i onto the plane H_B through B's centre, and a point p of B reads
-//! it at (p·u_i, p·v_i): the orthogonal projection of §6.2.2, in the
-//! light's frame (u_i, v_i, ω_i). The coverage is convolved with a box of
-//! side s = √Ω_i · D, D = (c_A − c_B)·ω_i the distance from H_B to A's plane
-//! H_A. Receivers are groups too (§4.2.3): the two colours of a board share
-//! their maps.
+//! along ω_i onto a plane perpendicular to it, and a point p of B reads it
+//! at (p·u_i, p·v_i): the orthogonal projection of §6.2.2, in the light's
+//! frame (u_i, v_i, ω_i). Receivers are groups too (§4.2.3): the two
+//! colours of a board share their maps.
+//!
+//! Where this departs from §4.2.2: the paper blurs a whole map by one box
+//! of side s = √Ω_i · D, D = (c_A − c_B)·ω_i the distance between the planes
+//! through the groups' centres. That is wrong wherever the shadow does not
+//! fall at the receiver's centre plane: a piece's foot on the board (D from
+//! the piece's middle), a piece at the corner of a large board under a
+//! slanted light (D off by the corner's offset along ω_i). Here each texel
+//! keeps its occluder's height along ω_i (the surface nearest the light, as
+//! a shadow map does), and the receiver's height on that texel's line is
+//! the light-facing side of B's bounding box; the map is then filtered as
+//! percentage-closer soft shadows prefiltered on a summed-area table: per
+//! texel, the mean height of the occluders within the widest penumbra
+//! gives the distance d and the box's side s = √Ω_i · d. The paper's fixed
+//! D is the case of a flat occluder over a receiver plane through B's
+//! centre. Occluder texels behind the receiver's surface (the board under a
+//! piece, as seen from a low light above) cast nothing.
 //!
 //! The paper sizes a map to its receiver. Here a map covers the smaller of
-//! two squares: the receiver's projected bounding sphere widened by s/2, or
-//! the occluder's widened by s/2, outside which the blurred shadow is zero.
-//! A small piece over a large board then gets its texels where its shadow
-//! falls instead of spreading them over the whole board; points outside the
-//! window read zero.
+//! two squares: the receiver's projected bounding sphere widened by half
+//! the widest box, or the occluder's, outside which the filtered shadow is
+//! zero. A small piece over a large board then gets its texels where its
+//! shadow falls instead of spreading them over the whole board; points
+//! outside the window read zero.
 //!
-//! A pair whose occluder plane is not nearer the light than the receiver's
-//! (D ≤ 0: the occluder lies behind the receiver, as seen from the light)
-//! casts nothing: the plane approximation cannot say which part of B it
-//! shades, and the common case is a floor under an object, which must not
-//! darken the object for lights above. Pairs whose blurred shadow cannot
-//! reach the receiver are skipped.
+//! A pair whose occluder's centre is not nearer the light than the
+//! receiver's (D ≤ 0) gets no map: the common case is a floor under an
+//! object, which must not darken the object for lights above. Pairs whose
+//! filtered shadow cannot reach the receiver are skipped.
 
 use glam::{Vec2, Vec3, Vec4};
 use shadow_core::Aabb;
@@ -62,7 +74,9 @@ impl GpuLight {
 
 shadow_core::wgsl_struct! {
     /// One occlusion map as the shaders read it: its window in the light's
-    /// plane, its blur, and which light, occluder group and receiver it is for.
+    /// plane, how the light's size turns distance into blur, which light,
+    /// occluder group and receiver it is for, and the heights (x·ω_i) the
+    /// filter compares.
     #[repr(C)]
     #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
     pub struct MapWindow {
@@ -70,8 +84,9 @@ shadow_core::wgsl_struct! {
         pub centre: Vec2,
         /// 1 / the window's side, world units.
         pub inverse_side: f32,
-        /// The box's side s, in texels.
-        pub blur: f32,
+        /// The box's side per unit of occluder distance, texels: √Ω_i times
+        /// the texels per world unit.
+        pub spread: f32,
         pub light: u32,
         /// The occluder group.
         pub occluder: u32,
@@ -80,8 +95,37 @@ shadow_core::wgsl_struct! {
         /// Where the map is drawn: its tile in its batch of the atlas (set by
         /// the GPU side for the maps it draws).
         pub tile: u32,
+        /// The receiving group's bounding box: its light-facing side is the
+        /// receiver's height on each texel's line ([`receiver_height`]).
+        pub receiver_min: Vec4,
+        pub receiver_max: Vec4,
+        /// The occluder group's heights lie in [near, far] (its bounding
+        /// sphere's, padded): the range the map's depth is rendered over.
+        pub near: f32,
+        pub far: f32,
+        pub _pad: Vec2,
     }
 }
+
+/// Where the line {o + t ω} last leaves the box [min, max] toward the
+/// light: the least over the axes of the larger slab bound (an axis along
+/// which the line does not move bounds nothing). Concave in o and
+/// continuous, also past the box's silhouette, where it extends the
+/// box's light-facing side; maps.wgsl's `receiver_height` is the same.
+pub fn receiver_height(o: Vec3, omega: Vec3, min: Vec3, max: Vec3) -> f32 {
+    let mut exit = f32::INFINITY;
+    for k in 0..3 {
+        if omega[k].abs() > AXIS_EPSILON {
+            let (a, b) = ((min[k] - o[k]) / omega[k], (max[k] - o[k]) / omega[k]);
+            exit = exit.min(a.max(b));
+        }
+    }
+    exit
+}
+
+/// Light direction components below this count as zero in
+/// [`receiver_height`].
+pub const AXIS_EPSILON: f32 = 1e-6;
 
 /// Every map of a frame, sorted by receiving group and then light, with the
 /// range of maps each (receiver, light) reads.
@@ -159,36 +203,59 @@ fn sphere(b: &Aabb) -> (Vec3, f32) {
     (b.center(), 0.5 * b.diagonal())
 }
 
+/// The occluder's depth range is its sphere's, widened by this fraction of
+/// the radius (and a little more), so that rounding never clips a vertex.
+const DEPTH_PADDING: f32 = 1e-3;
+
 impl Plan {
     /// The maps between the groups of objects with bounds `objects` under
     /// `lights`, at `resolution` texels a side.
     pub fn new(lights: &[GpuLight], objects: &[Aabb], groups: &Groups, resolution: u32) -> Plan {
         let q = lights.len();
-        let spheres: Vec<(Vec3, f32)> = groups
+        let boxes: Vec<Aabb> = groups
             .members
             .iter()
-            .map(|m| sphere(&m.iter().map(|&o| objects[o]).fold(Aabb::EMPTY, Aabb::union)))
+            .map(|m| m.iter().map(|&o| objects[o]).fold(Aabb::EMPTY, Aabb::union))
             .collect();
+        let spheres: Vec<(Vec3, f32)> = boxes.iter().map(sphere).collect();
         let mut plan = Plan {
             maps: Vec::new(),
             ranges: vec![[0, 0]; groups.len() * q],
         };
-        for (b, &(centre, radius)) in spheres.iter().enumerate() {
+        for (b, (&(centre, radius), receiver)) in spheres.iter().zip(&boxes).enumerate() {
             for (i, light) in lights.iter().enumerate() {
                 let first = plan.maps.len() as u32;
                 let omega = light.omega();
                 let (u, v) = (light.u.truncate(), light.v.truncate());
+                let root = light.direction.w.sqrt();
                 for (a, &(occluder, occluder_radius)) in spheres.iter().enumerate() {
                     if a == b {
                         continue;
                     }
                     let offset = occluder - centre;
-                    let distance = offset.dot(omega);
-                    if distance <= 0.0 {
+                    if offset.dot(omega) <= 0.0 {
                         continue;
                     }
-                    let side = light.direction.w.sqrt() * distance;
-                    let apart = (offset - distance * omega).length();
+                    let pad = DEPTH_PADDING * (occluder_radius + occluder.dot(omega).abs()) + 1e-6;
+                    let near = occluder.dot(omega) - occluder_radius - pad;
+                    let far = occluder.dot(omega) + occluder_radius + pad;
+                    // The widest box: from the occluder's top to the lowest
+                    // receiver height under its footprint, a square in the
+                    // light's plane whose corners bound the concave height.
+                    let lowest = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
+                        .map(|(x, y)| {
+                            let o = occluder + occluder_radius * (x * u + y * v);
+                            receiver_height(
+                                o - o.dot(omega) * omega,
+                                omega,
+                                receiver.min,
+                                receiver.max,
+                            )
+                        })
+                        .into_iter()
+                        .fold(f32::INFINITY, f32::min);
+                    let side = root * (far - lowest).max(0.0);
+                    let apart = (offset - offset.dot(omega) * omega).length();
                     if apart > occluder_radius + radius + side {
                         continue;
                     }
@@ -200,11 +267,16 @@ impl Plan {
                     plan.maps.push(MapWindow {
                         centre: Vec2::new(middle.dot(u), middle.dot(v)),
                         inverse_side: 1.0 / (2.0 * half),
-                        blur: side / (2.0 * half) * resolution as f32,
+                        spread: root * resolution as f32 / (2.0 * half),
                         light: i as u32,
                         occluder: a as u32,
                         receiver: b as u32,
                         tile: 0,
+                        receiver_min: receiver.min.extend(0.0),
+                        receiver_max: receiver.max.extend(0.0),
+                        near,
+                        far,
+                        _pad: Vec2::ZERO,
                     });
                 }
                 plan.ranges[b * q + i] = [first, plan.maps.len() as u32 - first];
@@ -250,12 +322,18 @@ mod tests {
         assert_eq!(plan.ranges, vec![[0, 1], [1, 0], [1, 0], [1, 1]]);
         let map = plan.maps[0];
         assert_eq!((map.light, map.occluder, map.receiver), (0, 1, 0));
-        // s = √Ω · D with D = 0.5; the window is the ball's sphere (smaller
-        // than the floor's) widened by s/2 each side, around the ball.
-        let s = 0.1f32.sqrt() * 0.5;
-        let side = 2.0 * 0.2 * 3.0f32.sqrt() + s;
+        // The widest box: s = √Ω · d, d from the ball's top (its sphere's,
+        // radius 0.2√3, padded) down to the floor; the window is the ball's
+        // sphere (smaller than the floor's) widened by s/2 each side.
+        let radius = 0.2 * 3.0f32.sqrt();
+        approx::assert_relative_eq!(map.far, 0.5 + radius, epsilon = 2e-3);
+        approx::assert_relative_eq!(map.near, 0.5 - radius, epsilon = 2e-3);
+        let s = 0.1f32.sqrt() * map.far;
+        let side = 2.0 * radius + s;
         approx::assert_relative_eq!(map.inverse_side, 1.0 / side, max_relative = 1e-5);
-        approx::assert_relative_eq!(map.blur, s / side * 64.0, max_relative = 1e-5);
+        approx::assert_relative_eq!(map.spread, 0.1f32.sqrt() / side * 64.0, max_relative = 1e-5);
+        assert_eq!(map.receiver_min.truncate(), floor.min);
+        assert_eq!(map.receiver_max.truncate(), floor.max);
         let ball = Vec3::new(0.0, 0.5, 0.0);
         let at = Vec2::new(
             ball.dot(lights[0].u.truncate()),
@@ -277,5 +355,30 @@ mod tests {
         let alone = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &[a]).unwrap();
         let plan = Plan::new(&[light(Vec3::Y, 4.0)], &[a], &alone, 64);
         assert!(plan.maps.is_empty());
+    }
+
+    /// The light-facing side of a box, and its continuation past the
+    /// silhouette: straight down onto a unit cube, the top; slanted, the
+    /// face the line leaves by; beside the cube, the least slab exit.
+    #[test]
+    fn receiver_height_is_where_the_line_leaves_the_box() {
+        let (min, max) = (Vec3::ZERO, Vec3::ONE);
+        let up = Vec3::Y;
+        assert_eq!(
+            receiver_height(Vec3::new(0.5, -3.0, 0.5), up, min, max),
+            4.0
+        );
+        // Along (1, 1, 0)/√2 from (0, 0, 0.5): leaves by x = 1 and y = 1
+        // at t = √2.
+        let slant = Vec3::new(1.0, 1.0, 0.0).normalize();
+        let h = receiver_height(Vec3::new(0.0, 0.0, 0.5), slant, min, max);
+        approx::assert_relative_eq!(h, 2f32.sqrt(), max_relative = 1e-6);
+        // From (0.5, 0, 0.5) it leaves by x = 1 at t = 0.5√2 (y is 0.5).
+        let h = receiver_height(Vec3::new(0.5, 0.0, 0.5), slant, min, max);
+        approx::assert_relative_eq!(h, 0.5 * 2f32.sqrt(), max_relative = 1e-6);
+        // z does not move along the line: z outside [0, 1] bounds nothing,
+        // so the height continues the box's past its side.
+        let beside = receiver_height(Vec3::new(0.5, 0.0, 2.0), slant, min, max);
+        approx::assert_relative_eq!(beside, 0.5 * 2f32.sqrt(), max_relative = 1e-6);
     }
 }

@@ -133,7 +133,7 @@ impl DeferredPass {
             &surface_layout,
             &surface_module,
             ("surface", "visible"),
-            SURFACE,
+            Some(SURFACE),
             Some(depth),
         );
 

@@ -1,8 +1,9 @@
 //! The map pass (§4.2.2, §6.2.1): the occlusion maps of a plan, rendered
-//! into a coverage atlas batch by batch (each occluder drawn once per map it
-//! covers, instanced) and blurred by a box of the light's size into one
-//! array of maps, which the deferred pass reads; maps kept from the
-//! previous frame are copied, not drawn.
+//! into a depth atlas batch by batch (each occluder drawn once per map it
+//! covers, instanced), summed into tables and filtered by boxes of the
+//! light's size times each texel's occluder distance into one array of
+//! maps, which the deferred pass reads; maps kept from the previous frame
+//! are copied, not drawn.
 
 use std::num::NonZeroU64;
 
@@ -11,11 +12,12 @@ use shadow_core::gpu::binding::{
     compute_pipeline, dynamic_uniform, entry, group_layout, storage, texture, uniform,
 };
 use shadow_core::gpu::buffer::{Growing, storage_limit, upload};
+use shadow_core::gpu::depth::DEPTH_FORMAT;
 use shadow_core::gpu::wgsl::Source;
 use shadow_core::{Error, Result};
 
 use super::scene::{Scene, pulled_pipeline, shader};
-use crate::maps::Plan;
+use crate::maps::{AXIS_EPSILON, Plan};
 
 shadow_core::wgsl_struct! {
     /// One batch of maps in the atlas, as maps.wgsl reads it.
@@ -50,9 +52,6 @@ const MAX_DISPATCH: u32 = 65_535;
 
 /// Side of the atlas the maps are rendered into, at most.
 const MAX_ATLAS: u32 = 8192;
-
-/// The coverage atlas's format: one float per texel, rendered and read.
-const COVERAGE: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
 
 /// Refuses, before anything is allocated, a plan whose storage does not fit
 /// a device of `limits`: `maps` occlusion maps of `resolution`² texels, one
@@ -102,9 +101,9 @@ pub fn check_storage(
 pub(super) struct MapPass {
     cover: wgpu::RenderPipeline,
     cover_layout: wgpu::BindGroupLayout,
-    blur_rows: wgpu::ComputePipeline,
-    blur_columns: wgpu::ComputePipeline,
-    blur_layout: wgpu::BindGroupLayout,
+    /// Summed-area tables, rows then columns, then the filter.
+    filter_steps: [wgpu::ComputePipeline; 3],
+    filter_layout: wgpu::BindGroupLayout,
     /// Texels per map side.
     resolution: u32,
     /// The plan's windows.
@@ -114,7 +113,7 @@ pub(super) struct MapPass {
     pub culling: wgpu::Buffer,
     pub masks_offset: u32,
     instances: wgpu::Buffer,
-    /// The blurred maps, one after another.
+    /// The filtered maps, one after another.
     pub blurred: Growing,
     /// The previous frame's maps, from which kept maps are copied.
     previous: Growing,
@@ -122,8 +121,10 @@ pub(super) struct MapPass {
     copies: Vec<(u32, u32, u32)>,
     /// The maps drawn, tile after tile.
     drawn: wgpu::Buffer,
-    rows: Growing,
-    coverage: Option<(u32, wgpu::TextureView)>,
+    /// The summed-area tables of a batch's tiles.
+    tables: Growing,
+    /// The depth atlas: its side and view.
+    depth: Option<(u32, wgpu::TextureView)>,
     batches: Vec<Batch>,
     /// Maps of the current plan.
     pub map_count: u32,
@@ -134,6 +135,7 @@ impl MapPass {
         let vertex = wgpu::ShaderStages::VERTEX;
         let cs = wgpu::ShaderStages::COMPUTE;
         let body = Source::new()
+            .float("AXIS_EPSILON", AXIS_EPSILON)
             .declare::<Atlas>()
             .body(include_str!("../shaders/maps.wgsl"));
         let module = shader(ctx, "occlusion maps", body);
@@ -154,17 +156,23 @@ impl MapPass {
             &cover_layout,
             &module,
             ("cover", "covered"),
-            COVERAGE,
             None,
+            Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
         );
-        let float = wgpu::TextureSampleType::Float { filterable: false };
-        let blur_layout = group_layout(
+        let filter_layout = group_layout(
             ctx,
-            "blur",
+            "filter",
             &[
                 dynamic_uniform(0, cs),
+                uniform(4, cs),
                 storage(5, true, cs),
-                texture(7, float, cs),
+                texture(7, wgpu::TextureSampleType::Depth, cs),
                 storage(8, false, cs),
                 storage(9, false, cs),
                 storage(10, true, cs),
@@ -173,11 +181,11 @@ impl MapPass {
         let storage_usage = wgpu::BufferUsages::STORAGE;
         let none: &[u32] = &[];
         MapPass {
-            blur_rows: compute_pipeline(ctx, &blur_layout, &module, "blur_rows"),
-            blur_columns: compute_pipeline(ctx, &blur_layout, &module, "blur_columns"),
+            filter_steps: ["sum_rows", "sum_columns", "filter_maps"]
+                .map(|step| compute_pipeline(ctx, &filter_layout, &module, step)),
             cover,
             cover_layout,
-            blur_layout,
+            filter_layout,
             resolution,
             maps: upload(ctx, "maps", none, storage_usage),
             culling: upload(ctx, "map ranges and masks", none, storage_usage),
@@ -195,8 +203,8 @@ impl MapPass {
             ),
             copies: Vec::new(),
             drawn: upload(ctx, "maps drawn", none, storage_usage),
-            rows: Growing::new(ctx, "blurred rows", storage_usage),
-            coverage: None,
+            tables: Growing::new(ctx, "summed-area tables", storage_usage),
+            depth: None,
             batches: Vec::new(),
             map_count: 0,
         }
@@ -226,7 +234,10 @@ impl MapPass {
         let n = self.resolution;
         let limit = ctx.device.limits().max_texture_dimension_2d.min(MAX_ATLAS);
         let per_row = (limit / n).max(1);
-        let capacity = (per_row * per_row).min(MAX_DISPATCH);
+        // A batch's summed-area tables, 8 bytes per corner, in one binding.
+        let table = 8 * u64::from(n + 1).pow(2);
+        let tables = (storage_limit(&ctx.device.limits()) / table).max(1) as u32;
+        let capacity = (per_row * per_row).min(MAX_DISPATCH).min(tables);
         let count = plan.maps.len() as u32;
         let n2 = (n * n) as u64;
         // Kept maps are copied from the previous frame's array, runs of
@@ -274,8 +285,8 @@ impl MapPass {
                 draws,
             });
         }
-        self.rows
-            .reserve(ctx, 4 * n2 * (drawn.len() as u32).clamp(1, capacity) as u64);
+        self.tables
+            .reserve(ctx, table * (drawn.len() as u32).clamp(1, capacity) as u64);
         let storage_usage = wgpu::BufferUsages::STORAGE;
         self.maps = upload(ctx, "maps", &maps, storage_usage);
         let mut culling: Vec<u32> = plan.ranges.iter().flatten().copied().collect();
@@ -288,22 +299,23 @@ impl MapPass {
         let largest = self.batches.iter().map(|b| b.count).max().unwrap_or(1);
         let tiles = (largest as f64).sqrt().ceil() as u32;
         let side = (tiles * n).min(per_row * n);
-        if self.coverage.as_ref().is_none_or(|(s, _)| *s < side) {
+        if self.depth.as_ref().is_none_or(|(s, _)| *s < side) {
             let texture = ctx.create_texture_2d(
-                "coverage atlas",
+                "depth atlas",
                 (side, side),
-                COVERAGE,
+                DEPTH_FORMAT,
                 wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             );
-            self.coverage = Some((side, texture.create_view(&Default::default())));
+            self.depth = Some((side, texture.create_view(&Default::default())));
         }
     }
 
-    /// Renders and blurs every map of the plan: per batch, the occluders
-    /// onto their tiles of the coverage atlas, then the box blur by running
-    /// sums, rows then columns, into the array of maps.
+    /// Renders and filters every map of the plan: per batch, the
+    /// occluders' heights onto their tiles of the depth atlas, then the
+    /// tiles' summed-area tables, rows then columns, then the filter into
+    /// the array of maps.
     pub fn record(&self, ctx: &GpuContext, scene: &Scene, encoder: &mut wgpu::CommandEncoder) {
-        let Some((side, coverage)) = &self.coverage else {
+        let Some((side, depth)) = &self.depth else {
             return;
         };
         let n = self.resolution;
@@ -340,14 +352,15 @@ impl MapPass {
                 entry(6, self.instances.as_entire_binding()),
             ],
         });
-        let blur_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("blur"),
-            layout: &self.blur_layout,
+        let filter_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("filter"),
+            layout: &self.filter_layout,
             entries: &[
                 entry(0, atlas_binding()),
+                entry(4, scene.lights.as_entire_binding()),
                 entry(5, self.maps.as_entire_binding()),
-                entry(7, wgpu::BindingResource::TextureView(coverage)),
-                entry(8, self.rows.buffer().as_entire_binding()),
+                entry(7, wgpu::BindingResource::TextureView(depth)),
+                entry(8, self.tables.buffer().as_entire_binding()),
                 entry(9, self.blurred.buffer().as_entire_binding()),
                 entry(10, self.drawn.as_entire_binding()),
             ],
@@ -367,16 +380,15 @@ impl MapPass {
             {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("occluders onto maps"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: coverage,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: depth,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
                             store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
+                        }),
+                        stencil_ops: None,
+                    }),
                     timestamp_writes: None,
                     occlusion_query_set: None,
                     multiview_mask: None,
@@ -390,14 +402,17 @@ impl MapPass {
                 }
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("box blur"),
+                label: Some("filter"),
                 timestamp_writes: None,
             });
-            pass.set_bind_group(0, &blur_group, &[offset]);
-            for pipeline in [&self.blur_rows, &self.blur_columns] {
+            pass.set_bind_group(0, &filter_group, &[offset]);
+            let [rows, columns, filter] = &self.filter_steps;
+            for pipeline in [rows, columns] {
                 pass.set_pipeline(pipeline);
-                pass.dispatch_workgroups(n.div_ceil(64), batch.count, 1);
+                pass.dispatch_workgroups((n + 1).div_ceil(64), batch.count, 1);
             }
+            pass.set_pipeline(filter);
+            pass.dispatch_workgroups(n.div_ceil(64), batch.count, 1);
         }
     }
 }

@@ -37,7 +37,7 @@ mod scene;
 use std::sync::Arc;
 
 use bytemuck::Zeroable;
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use shadow_core::gpu::{GpuContext, buffer::upload};
 use shadow_core::{Camera, Error, Result};
 
@@ -210,11 +210,16 @@ impl Gpu {
             maps: vec![MapWindow {
                 centre: glam::Vec2::ZERO,
                 inverse_side: 1.0,
-                blur: 1.5,
+                spread: 1.5,
                 light: 0,
                 occluder: 0,
                 receiver: 0,
                 tile: 0,
+                receiver_min: Vec4::splat(-1.0),
+                receiver_max: Vec4::ZERO,
+                near: 0.0,
+                far: 1.0,
+                _pad: glam::Vec2::ZERO,
             }],
             ranges: vec![[0, 1]],
         };

@@ -170,13 +170,13 @@ pub(super) fn shader(ctx: &GpuContext, label: &str, body: Source) -> wgpu::Shade
 
 /// A render pipeline of the `(vertex, fragment)` entries of `module`
 /// pulling its vertices from storage (no vertex buffers), into one
-/// `target`.
+/// `target` (none: depth only), with `depth_stencil` when given.
 pub(super) fn pulled_pipeline(
     ctx: &GpuContext,
     layout: &wgpu::BindGroupLayout,
     module: &wgpu::ShaderModule,
     (vertex, fragment): (&str, &str),
-    target: wgpu::TextureFormat,
+    target: Option<wgpu::TextureFormat>,
     depth_stencil: Option<wgpu::DepthStencilState>,
 ) -> wgpu::RenderPipeline {
     ctx.device
@@ -196,7 +196,10 @@ pub(super) fn pulled_pipeline(
                 module,
                 entry_point: Some(fragment),
                 compilation_options: Default::default(),
-                targets: &[Some(target.into())],
+                targets: &target
+                    .map(|t| Some(t.into()))
+                    .into_iter()
+                    .collect::<Vec<_>>(),
             }),
             multiview_mask: None,
             cache: None,

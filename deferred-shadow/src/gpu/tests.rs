@@ -2,7 +2,7 @@ use super::*;
 use crate::config::Grouping;
 use crate::groups::Groups;
 use crate::lights::AreaLight;
-use glam::Mat4;
+use glam::{Mat4, Vec2};
 use shadow_core::{Aabb, Brdf, Mesh, gpu::test_context, shapes};
 
 /// Where a continuous profile sampled at `values[k]` (k = 0, 1, ...)
@@ -15,20 +15,53 @@ fn crossing(values: &[f32], level: f32) -> f32 {
     k as f32 + (values[k] - level) / (values[k] - values[k + 1])
 }
 
+/// The plan of `meshes` (grouped by overlap) under `light` at `n`² texels,
+/// and its maps as the map pass renders and filters them, one after
+/// another.
+fn filtered_maps(meshes: &[Mesh], light: GpuLight, n: u32) -> (Plan, Vec<f32>) {
+    let ctx = test_context();
+    let bounds: Vec<Aabb> = meshes.iter().map(Mesh::bounds).collect();
+    let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &bounds).unwrap();
+    let plan = Plan::new(&[light], &bounds, &groups, n);
+    let geometry = Geometry::new(meshes);
+    let white = Brdf::lambert(Vec3::ONE).unwrap();
+    let objects: Vec<GpuObject> = groups
+        .of_object
+        .iter()
+        .map(|&g| GpuObject::new(Mat4::IDENTITY, &white, g))
+        .collect();
+    let mut gpu = Gpu::new(Arc::clone(&ctx), &geometry, &objects, n, true).unwrap();
+    gpu.set_lights(&[light]).unwrap();
+    let positions: Vec<Vec3> = meshes
+        .iter()
+        .flat_map(|m| m.positions().iter().copied())
+        .collect();
+    let masks = plan.masks(&[light], &positions, &geometry.triangles, &groups.of_object);
+    let reuse = vec![None; plan.maps.len()];
+    gpu.set_plan(&plan, &masks, &groups.of_object, &reuse)
+        .unwrap();
+    ctx.run("test: occlusion maps", |encoder| gpu.record_maps(encoder))
+        .unwrap();
+    let texels = (n * n) as usize * plan.maps.len();
+    let maps = ctx
+        .read_buffer(gpu.maps.blurred.buffer(), 0, texels)
+        .unwrap();
+    (plan, maps)
+}
+
 /// A half-plane's occlusion map (§4.2.2): a 2 × 2 sheet at height D = 1
 /// over a 4 × 4 floor, under a light straight above of Ω = 0.25 sr, its
-/// edges along the light's plane axes (u, v). Across an edge the blurred
+/// edges along the light's plane axes (u, v). Across an edge the filtered
 /// map falls from 1 to 0 linearly over the box's side s = √Ω · D = 0.5
-/// (eq. 5–6, D between the planes through the sheet's and the floor's
-/// centres), in the row pass (across u) as in the column pass (across
-/// v), centred on the edge.
+/// (eq. 5–6; a flat occluder over a flat receiver, where every texel's
+/// distance is the paper's D), in the row direction (across u) as in the
+/// column direction (across v), centred on the edge.
 #[test]
 #[cfg_attr(
     skip_gpu_tests,
     ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
 )]
 fn the_blur_ramp_across_a_sheet_edge_is_s_wide() {
-    let ctx = test_context();
     let (omega, height, n) = (0.25f32, 1.0f32, 64);
     let light = GpuLight::new(&AreaLight {
         direction: Vec3::Y,
@@ -47,35 +80,10 @@ fn the_blur_ramp_across_a_sheet_edge_is_s_wide() {
     )
     .unwrap();
     let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 1).unwrap();
-    let meshes = [floor, sheet];
-    let bounds: Vec<Aabb> = meshes.iter().map(Mesh::bounds).collect();
-    let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &bounds).unwrap();
-    let plan = Plan::new(&[light], &bounds, &groups, n);
+    let (plan, blurred) = filtered_maps(&[floor, sheet], light, n);
     assert_eq!(plan.maps.len(), 1, "the sheet onto the floor");
     let map = plan.maps[0];
     let s = omega.sqrt() * height;
-
-    let geometry = Geometry::new(&meshes);
-    let white = Brdf::lambert(Vec3::ONE).unwrap();
-    let objects: Vec<GpuObject> = groups
-        .of_object
-        .iter()
-        .map(|&g| GpuObject::new(Mat4::IDENTITY, &white, g))
-        .collect();
-    let mut gpu = Gpu::new(Arc::clone(&ctx), &geometry, &objects, n, true).unwrap();
-    gpu.set_lights(&[light]).unwrap();
-    let positions: Vec<Vec3> = meshes
-        .iter()
-        .flat_map(|m| m.positions().iter().copied())
-        .collect();
-    let masks = plan.masks(&[light], &positions, &geometry.triangles, &groups.of_object);
-    gpu.set_plan(&plan, &masks, &groups.of_object, &[None])
-        .unwrap();
-    ctx.run("test: occlusion map", |encoder| gpu.record_maps(encoder))
-        .unwrap();
-    let blurred: Vec<f32> = ctx
-        .read_buffer(gpu.maps.blurred.buffer(), 0, (n * n) as usize)
-        .unwrap();
 
     // Texel k's centre along either axis, in the light's plane.
     let texel = 1.0 / (map.inverse_side * n as f32);
@@ -103,16 +111,98 @@ fn the_blur_ramp_across_a_sheet_edge_is_s_wide() {
             "ramp {width} wide (s = {s}, off by {:e}), half-way at {half_way} (edge {edge}, texel {texel})",
             width - s
         );
-        // Measured: the width is s to f32 rounding (off by 0) on both
-        // axes (the box blur integrates the texels exactly); half-way at
-        // −0.012 and 0.988, 0.23 texel from the edges (the coverage's
-        // step lies on a texel boundary).
+        // Measured: the width is s to f32 rounding (off by 4e-7) on both
+        // axes (the summed-area table integrates the texels exactly);
+        // half-way at 0.009 and 1.009, 0.15 texel from the edges (the
+        // coverage's step lies on a texel boundary).
         assert!((width - s).abs() < 1e-3 * s, "ramp {width}, s = {s}");
         assert!(
             (half_way - edge).abs() <= 0.5 * texel,
             "half-way at {half_way}"
         );
     }
+}
+
+/// Contact hardening, which one box per map cannot give (maps.rs): a 2 × 2
+/// plate standing upright on a floor (x = 0, z ∈ [−1, 1], y ∈ [0, 2])
+/// under a light of Ω = 0.25 sr from 45° above +x. A floor point (−ℓ, 0,
+/// z) beside the shadow's side edge z = −1 sees the plate's edge at
+/// distance d = ℓ√2 along the light, so the ramp across that edge is
+/// √Ω · ℓ√2 wide: narrow at the plate's foot, wider away from it. The
+/// paper's D (between the planes through the plate's and the floor's
+/// centres, 1/√2 here) gives one width, that of ℓ = 0.5, everywhere.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn the_penumbra_widens_away_from_the_contact() {
+    let (omega, n) = (0.25f32, 128);
+    let direction = Vec3::new(1.0, 1.0, 0.0).normalize();
+    // The plane's axes: u along z, across the side edge.
+    let light = GpuLight {
+        u: Vec3::Z.extend(0.0),
+        v: direction.cross(Vec3::Z).extend(0.0),
+        ..GpuLight::new(&AreaLight {
+            direction,
+            radiosity: Vec3::ONE,
+            solid_angle: omega,
+        })
+    };
+    let plate = shapes::grid(
+        "plate",
+        Vec3::new(0.0, 0.0, -1.0),
+        2.0 * Vec3::Z,
+        2.0 * Vec3::Y,
+        1,
+        1,
+    )
+    .unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 4.0, 1).unwrap();
+    let (plan, maps) = filtered_maps(&[floor, plate], light, n);
+    assert_eq!(plan.maps.len(), 1, "the plate onto the floor");
+    let map = plan.maps[0];
+    // The map at light-plane point `a`, bilinear (deferred.wgsl's map_at).
+    let at = |a: Vec2| {
+        let t = ((a - map.centre) * map.inverse_side + 0.5) * n as f32 - 0.5;
+        let t = t.clamp(Vec2::ZERO, Vec2::splat(n as f32 - 1.0));
+        let (k, f) = (t.floor(), t - t.floor());
+        let texel = |x: f32, y: f32| {
+            let (x, y) = ((x as u32).min(n - 1), (y as u32).min(n - 1));
+            maps[(y * n + x) as usize]
+        };
+        let top = texel(k.x, k.y) * (1.0 - f.x) + texel(k.x + 1.0, k.y) * f.x;
+        let bottom = texel(k.x, k.y + 1.0) * (1.0 - f.x) + texel(k.x + 1.0, k.y + 1.0) * f.x;
+        top * (1.0 - f.y) + bottom * f.y
+    };
+    let (u, v) = (light.u.truncate(), light.v.truncate());
+    let step = 0.005;
+    let widths: Vec<(f32, f32)> = [0.5f32, 1.0, 1.5]
+        .iter()
+        .map(|&l| {
+            // From inside the shadow (z = −0.2) out across z = −1.
+            let profile: Vec<f32> = (0..400)
+                .map(|k| {
+                    let p = Vec3::new(-l, 0.0, -0.2 - k as f32 * step);
+                    at(Vec2::new(p.dot(u), p.dot(v)))
+                })
+                .collect();
+            let width = (crossing(&profile, 0.25) - crossing(&profile, 0.75)) / 0.5 * step;
+            let expected = omega.sqrt() * l * 2f32.sqrt();
+            println!("ℓ = {l}: ramp {width:.3} wide, √Ω·ℓ√2 = {expected:.3}");
+            (width, expected)
+        })
+        .collect();
+    // Measured: 0.422, 0.706 and 1.098 against 0.354, 0.707 and 1.061: the
+    // mean occluder height within the widest penumbra (PCSS's blocker
+    // search) leans toward the plate's middle, 19% wide at the foot.
+    for &(width, expected) in &widths {
+        assert!(
+            (width - expected).abs() < 0.25 * expected,
+            "ramp {width}, expected {expected}"
+        );
+    }
+    assert!(widths[2].0 > 2.0 * widths[0].0, "{widths:?}");
 }
 
 /// 4,800 maps of 256² at q = 256, 1.26 GB: more than the 128 MiB a

@@ -1,8 +1,11 @@
 // Occlusion maps (§4.2.2, §6.2.1): occluders projected along each light onto
-// their tile of an atlas, then convolved with a box (eq. 5–6) by running
-// sums, rows then columns, into one array of maps.
+// their tile of a depth atlas (the height x·ω of the surface nearest the
+// light), then filtered into one array of maps by a box (eq. 5–6) whose
+// side follows each texel's occluder distance: percentage-closer soft
+// shadows on a summed-area table (maps.rs says where this departs from the
+// paper's one box per map).
 
-// Atlas is declared from Rust (gpu/map_pass.rs).
+// Atlas and AXIS_EPSILON are declared from Rust (gpu/map_pass.rs).
 
 @group(0) @binding(0) var<uniform> atlas: Atlas;
 @group(0) @binding(1) var<storage, read> vertices: array<GpuVertex>;
@@ -12,6 +15,8 @@
 @group(0) @binding(6) var<storage, read> instances: array<u32>;
 
 struct Covered {
+    // z: the height, 0 at the map's `far` and 1 at its `near` (less is
+    // nearer the light and wins the depth test).
     @builtin(position) position: vec4<f32>,
     // The tile's texel rectangle: (x0, y0, x1, y1).
     @location(0) @interpolate(flat) tile: vec4<f32>,
@@ -34,105 +39,167 @@ fn cover(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: 
     let origin = tile_origin(map.tile);
     let texel = origin + uv * f32(atlas.resolution);
     var out: Covered;
-    out.position = vec4<f32>(texel.x / atlas.side * 2.0 - 1.0, 1.0 - texel.y / atlas.side * 2.0, 0.5, 1.0);
+    let depth = (map.far - dot(x, light.direction.xyz)) / (map.far - map.near);
+    out.position = vec4<f32>(texel.x / atlas.side * 2.0 - 1.0, 1.0 - texel.y / atlas.side * 2.0, depth, 1.0);
     out.tile = vec4<f32>(origin, origin + f32(atlas.resolution));
     return out;
 }
 
 @fragment
-fn covered(in: Covered) -> @location(0) vec4<f32> {
+fn covered(in: Covered) {
     if any(in.position.xy < in.tile.xy) || any(in.position.xy >= in.tile.zw) {
         discard;
     }
-    return vec4<f32>(1.0);
 }
 
-@group(0) @binding(7) var coverage: texture_2d<f32>;
-@group(0) @binding(8) var<storage, read_write> rows: array<f32>;
+@group(0) @binding(7) var depth: texture_depth_2d;
+// Per tile of the batch, (n + 1)² sums: entry (y, x) holds the sums over
+// texels [0, x) × [0, y) of (c, c (h − near)), c = 1 where an occluder
+// in front of the receiver covers the texel, h its height.
+@group(0) @binding(8) var<storage, read_write> table: array<vec2<f32>>;
 @group(0) @binding(9) var<storage, read_write> blurred: array<f32>;
 // The maps drawn, by tile: batch `atlas.first`'s tile t is map
 // `drawn[atlas.first + t]`.
 @group(0) @binding(10) var<storage, read> drawn: array<u32>;
 
-// One texel of the line being blurred (zero outside the map): row `line`
-// of the coverage tile in the row pass, column `line` of the row-blurred
-// map in the column pass.
-fn texel_of(columns: bool, tile: u32, line: u32, k: i32) -> f32 {
-    let n = atlas.resolution;
-    if k < 0 || k >= i32(n) {
-        return 0.0;
+// The larger of the line's two crossings of the slab [lo, hi] along an
+// axis where it moves by w per unit of height, from o (none: +∞).
+fn slab_exit(lo: f32, hi: f32, o: f32, w: f32) -> f32 {
+    if abs(w) <= AXIS_EPSILON {
+        return 3.0e38;
     }
-    if columns {
-        return rows[tile * n * n + u32(k) * n + line];
-    }
-    let origin = vec2<u32>(tile_origin(tile));
-    return textureLoad(coverage, origin + vec2<u32>(u32(k), line), 0).x;
+    return max((lo - o) / w, (hi - o) / w);
 }
 
-fn store(columns: bool, index: u32, value: f32) {
-    if columns {
-        blurred[index] = value;
-    } else {
-        rows[index] = value;
-    }
+// The light-facing side of the receiver's box on the line through
+// light-plane point `a` (maps.rs's `receiver_height`).
+fn receiver_height(m: MapWindow, light: GpuLight, a: vec2<f32>) -> f32 {
+    let o = a.x * light.u.xyz + a.y * light.v.xyz;
+    let w = light.direction.xyz;
+    let lo = m.receiver_min.xyz;
+    let hi = m.receiver_max.xyz;
+    return min(min(slab_exit(lo.x, hi.x, o.x, w.x), slab_exit(lo.y, hi.y, o.y, w.y)), slab_exit(lo.z, hi.z, o.z, w.z));
 }
 
-// The box average of side `side` texels centred on each texel of a line,
-// written at `base + x * step`: the integral over the box, slid one texel
-// at a time (what enters on the right minus what leaves on the left; both
-// ends keep the fraction φ of a texel, so each step reads one new texel at
-// each end). No per-lane indexing of arrays, which a software rasterizer
-// runs as gathers from scratch memory.
-fn blur(columns: bool, tile: u32, line: u32, side: f32, base: u32, step: u32) {
+// Texel (x, y)'s centre in the light's plane.
+fn plane_point(m: MapWindow, x: u32, y: u32) -> vec2<f32> {
+    let uv = (vec2<f32>(f32(x), f32(y)) + 0.5) / f32(atlas.resolution) - 0.5;
+    return m.centre + uv / m.inverse_side;
+}
+
+fn table_base(tile: u32) -> u32 {
+    let m = atlas.resolution + 1u;
+    return tile * m * m;
+}
+
+// Row pass: gid.x the row, gid.y the tile. Entry (y + 1, x + 1) of the
+// table gets the sum along row y up to texel x.
+@compute @workgroup_size(64)
+fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n = atlas.resolution;
-    if side < 1e-3 {
-        for (var x = 0u; x < n; x++) {
-            store(columns, base + x * step, texel_of(columns, tile, line, i32(x)));
+    let y = gid.x;
+    let tile = gid.y;
+    if y > n {
+        return;
+    }
+    let base = table_base(tile) + y * (n + 1u);
+    table[base] = vec2<f32>(0.0);
+    if y == 0u {
+        for (var x = 1u; x <= n; x++) {
+            table[base + x] = vec2<f32>(0.0);
         }
         return;
     }
-    // The first box, [a, b] around texel 0's centre, summed texel by texel.
-    let a = 0.5 - 0.5 * side;
-    let b = a + side;
-    var sum = 0.0;
-    for (var k = floor(a); k < b; k += 1.0) {
-        let overlap = min(b, k + 1.0) - max(a, k);
-        sum += overlap * texel_of(columns, tile, line, i32(k));
-    }
-    // ∫_t^{t+1} = (1 − φ) f(k) + φ f(k + 1) at t = k + φ, for both ends.
-    let ka = i32(floor(a));
-    let kb = i32(floor(b));
-    let fa = a - floor(a);
-    let fb = b - floor(b);
-    var leaving = texel_of(columns, tile, line, ka);
-    var entering = texel_of(columns, tile, line, kb);
-    for (var x = 0; x < i32(n); x++) {
-        store(columns, base + u32(x) * step, sum / side);
-        let leaving_next = texel_of(columns, tile, line, ka + x + 1);
-        let entering_next = texel_of(columns, tile, line, kb + x + 1);
-        sum += (1.0 - fb) * entering + fb * entering_next - (1.0 - fa) * leaving - fa * leaving_next;
-        leaving = leaving_next;
-        entering = entering_next;
+    let m = maps[drawn[atlas.first + tile]];
+    let light = lights[m.light];
+    let origin = vec2<u32>(tile_origin(tile));
+    var sum = vec2<f32>(0.0);
+    for (var x = 0u; x < n; x++) {
+        let z = textureLoad(depth, origin + vec2<u32>(x, y - 1u), 0);
+        let h = m.far - z * (m.far - m.near);
+        // An occluder level with the receiver's side (a floor under a
+        // post's bottom face, lit from below) counts, whatever the
+        // rounding of the two heights: contact is occlusion.
+        let tie = 1e-4 * (m.far - m.near);
+        if z < 1.0 && h >= receiver_height(m, light, plane_point(m, x, y - 1u)) - tie {
+            sum += vec2<f32>(1.0, h - m.near);
+        }
+        table[base + x + 1u] = sum;
     }
 }
 
-// Rows of the maps of one batch: gid.x the row, gid.y the tile.
+// Column pass: gid.x the column, gid.y the tile; the row sums become the
+// table, in place.
 @compute @workgroup_size(64)
-fn blur_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn sum_columns(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n = atlas.resolution;
-    if gid.x >= n {
+    let x = gid.x;
+    if x > n {
         return;
     }
-    blur(false, gid.y, gid.x, maps[drawn[atlas.first + gid.y]].blur, gid.y * n * n + gid.x * n, 1u);
+    let base = table_base(gid.y) + x;
+    var sum = vec2<f32>(0.0);
+    for (var y = 1u; y <= n; y++) {
+        sum += table[base + y * (n + 1u)];
+        table[base + y * (n + 1u)] = sum;
+    }
 }
 
-// Columns: gid.x the column, gid.y the tile.
-@compute @workgroup_size(64)
-fn blur_columns(@builtin(global_invocation_id) gid: vec3<u32>) {
+// The table at a point in texel units, bilinear: the exact integral of the
+// piecewise-constant texels over [0, p.x] × [0, p.y] (the integral is
+// bilinear within a texel and the table holds it at the corners).
+fn table_at(base: u32, p: vec2<f32>) -> vec2<f32> {
     let n = atlas.resolution;
-    if gid.x >= n {
+    let q = clamp(p, vec2<f32>(0.0), vec2<f32>(f32(n)));
+    let k = min(vec2<u32>(floor(q)), vec2<u32>(n - 1u));
+    let f = q - vec2<f32>(k);
+    let row = n + 1u;
+    let at = base + k.y * row + k.x;
+    let top = mix(table[at], table[at + 1u], f.x);
+    let bottom = mix(table[at + row], table[at + row + 1u], f.x);
+    return mix(top, bottom, f.y);
+}
+
+// The table at a corner of the texel grid, clamped to the map.
+fn table_corner(base: u32, k: vec2<i32>) -> vec2<f32> {
+    let c = vec2<u32>(clamp(k, vec2<i32>(0), vec2<i32>(i32(atlas.resolution))));
+    return table[base + c.y * (atlas.resolution + 1u) + c.x];
+}
+
+// The filtered map, a row per invocation (gid.x the row, gid.y the tile:
+// a workgroup per texel costs llvmpipe more than the texel's work).
+// Per texel, the blockers within the widest box its receiver can see (√Ω_i
+// times its distance to the occluders' top, widened to whole texels) give
+// their mean height h̄; d = h̄ − the receiver's height, s = √Ω_i · d, and
+// the texel takes the covered fraction of the box of side s around it (at
+// least the texel itself: below a texel's side the box sees only it).
+@compute @workgroup_size(64)
+fn filter_maps(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let n = atlas.resolution;
+    let y = gid.x;
+    if y >= n {
         return;
     }
     let id = drawn[atlas.first + gid.y];
-    blur(true, gid.y, gid.x, maps[id].blur, id * n * n + gid.x, n);
+    let m = maps[id];
+    let light = lights[m.light];
+    let base = table_base(gid.y);
+    for (var x = 0u; x < n; x++) {
+        let receiver = receiver_height(m, light, plane_point(m, x, y));
+        let reach = i32(ceil(0.5 * m.spread * max(m.far - receiver, 0.0)));
+        let xy = vec2<i32>(i32(x), i32(y));
+        let lo = xy - reach;
+        let hi = xy + 1 + reach;
+        let blockers = table_corner(base, hi) - table_corner(base, vec2<i32>(lo.x, hi.y))
+            - table_corner(base, vec2<i32>(hi.x, lo.y)) + table_corner(base, lo);
+        let d = max(m.near + blockers.y / max(blockers.x, 1e-6) - receiver, 0.0);
+        let side = max(m.spread * d, 1.0);
+        let p = vec2<f32>(xy) + 0.5;
+        let a = p - 0.5 * side;
+        let b = p + 0.5 * side;
+        let covered = table_at(base, b).x - table_at(base, vec2<f32>(a.x, b.y)).x
+            - table_at(base, vec2<f32>(b.x, a.y)).x + table_at(base, a).x;
+        let occlusion = select(0.0, covered / (side * side), blockers.x > 0.5);
+        blurred[id * n * n + y * n + x] = clamp(occlusion, 0.0, 1.0);
+    }
 }

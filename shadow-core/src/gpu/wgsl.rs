@@ -202,6 +202,13 @@ impl Source {
         self
     }
 
+    /// `const name: f32 = value;`
+    pub fn float(mut self, name: &str, value: f32) -> Source {
+        assert!(value.is_finite(), "WGSL has no literal for {value}");
+        writeln!(self.0, "const {name}: f32 = {value:e};").expect("writing to a String");
+        self
+    }
+
     /// `T`'s declaration (declare a struct before the structs that hold it).
     pub fn declare<T: WgslStruct>(mut self) -> Source {
         self.0.push_str(&T::declaration());
@@ -255,6 +262,15 @@ mod tests {
             inner: Inner,
             v: Vec4,
         }
+    }
+
+    #[test]
+    fn float_constants_are_wgsl_literals() {
+        let source = Source::new().float("EPSILON", 1e-6).float("HALF", 0.5);
+        assert_eq!(
+            source.as_str(),
+            "const EPSILON: f32 = 1e-6;\nconst HALF: f32 = 5e-1;\n"
+        );
     }
 
     #[test]
