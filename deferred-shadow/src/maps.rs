@@ -241,7 +241,8 @@ impl Plan {
                     let far = occluder.dot(omega) + occluder_radius + pad;
                     // The widest box: from the occluder's top to the lowest
                     // receiver height under its footprint, a square in the
-                    // light's plane whose corners bound the concave height.
+                    // light's plane whose corners bound the concave height;
+                    // no receiver point lies below the box's lowest corner.
                     let lowest = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
                         .map(|(x, y)| {
                             let o = occluder + occluder_radius * (x * u + y * v);
@@ -253,10 +254,17 @@ impl Plan {
                             )
                         })
                         .into_iter()
-                        .fold(f32::INFINITY, f32::min);
+                        .fold(f32::INFINITY, f32::min)
+                        .max(
+                            (receiver.min * omega)
+                                .min(receiver.max * omega)
+                                .element_sum(),
+                        );
                     let side = root * (far - lowest).max(0.0);
                     let apart = (offset - offset.dot(omega) * omega).length();
-                    if apart > occluder_radius + radius + side {
+                    // A receiver point reads the occluder's footprint (a disc)
+                    // through a square of half-side s/2: at most s/√2 away.
+                    if apart > occluder_radius + radius + std::f32::consts::FRAC_1_SQRT_2 * side {
                         continue;
                     }
                     let (middle, half) = if occluder_radius < radius {

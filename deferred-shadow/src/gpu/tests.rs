@@ -111,11 +111,11 @@ fn the_blur_ramp_across_a_sheet_edge_is_s_wide() {
             "ramp {width} wide (s = {s}, off by {:e}), half-way at {half_way} (edge {edge}, texel {texel})",
             width - s
         );
-        // Measured: the width is s to f32 rounding (off by 4e-7) on both
-        // axes (the summed-area table integrates the texels exactly);
-        // half-way at 0.009 and 1.009, 0.15 texel from the edges (the
-        // coverage's step lies on a texel boundary).
-        assert!((width - s).abs() < 1e-3 * s, "ramp {width}, s = {s}");
+        // Measured: the width is s − 0.0078 on both axes, 0.12 texel short
+        // (s is 7.9 texels, taken as the blend of the odd boxes of sides 7
+        // and 9); half-way at 0.009 and 1.009, 0.15 texel from the edges
+        // (the coverage's step lies on a texel boundary).
+        assert!((width - s).abs() < 0.25 * texel, "ramp {width}, s = {s}");
         assert!(
             (half_way - edge).abs() <= 0.5 * texel,
             "half-way at {half_way}"
@@ -193,9 +193,9 @@ fn the_penumbra_widens_away_from_the_contact() {
             (width, expected)
         })
         .collect();
-    // Measured: 0.422, 0.706 and 1.098 against 0.354, 0.707 and 1.061: the
+    // Measured: 0.428, 0.705 and 1.081 against 0.354, 0.707 and 1.061: the
     // mean occluder height within the widest penumbra (PCSS's blocker
-    // search) leans toward the plate's middle, 19% wide at the foot.
+    // search) leans toward the plate's middle, 21% wide at the foot.
     for &(width, expected) in &widths {
         assert!(
             (width - expected).abs() < 0.25 * expected,
