@@ -69,15 +69,7 @@ impl DeferredShadow {
                         moved[scene.groups.of_object[o] as usize] = true;
                     }
                 }
-                let r = plan.reuse(previous, &moved);
-                for (k, o) in r.iter().enumerate() {
-                    if let Some(o) = o {
-                        if plan.maps[k] != previous.maps[*o as usize] {
-                            eprintln!("DEBUG2 {:?} {:?}", plan.maps[k], previous.maps[*o as usize]);
-                        }
-                    }
-                }
-                r
+                plan.reuse(previous, &moved)
             }
             None => vec![None; plan.maps.len()],
         };
