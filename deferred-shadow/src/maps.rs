@@ -19,7 +19,10 @@
 //! the light-facing side of B's bounding box; the map is then filtered as
 //! percentage-closer soft shadows prefiltered on a summed-area table: per
 //! texel, the mean height of the occluders within the widest penumbra
-//! gives the distance d and the box's side s = √Ω_i · d. The paper's fixed
+//! gives the distance d and the box's side s = √Ω_i · d (a blend of the two
+//! odd integer boxes around s, half the table loads of a box with
+//! fractional corners; the texels whose widest box is empty or all covered
+//! skip it). The paper's fixed
 //! D is the case of a flat occluder over a receiver plane through B's
 //! centre. Occluder texels behind the receiver's surface (the board under a
 //! piece, as seen from a low light above) cast nothing.
