@@ -34,10 +34,13 @@
 //! shadow falls instead of spreading them over the whole board; points
 //! outside the window read zero.
 //!
-//! A pair whose occluder's centre is not nearer the light than the
-//! receiver's (D ≤ 0) gets no map: the common case is a floor under an
-//! object, which must not darken the object for lights above. Pairs whose
-//! filtered shadow cannot reach the receiver are skipped.
+//! A pair whose occluder's centre lies behind the receiver's surface on
+//! the line through it along ω_i (the light-facing side of B's box there)
+//! gets no map: the common case is a floor under an object, which must not
+//! darken the object for lights above. The paper's planes (D ≤ 0) would
+//! also drop a sheet at the side of a floor whose centre lies nearer a
+//! slanted light than the sheet's, and with it the sheet's shadow. Pairs
+//! whose filtered shadow cannot reach the receiver are skipped.
 
 use glam::{Vec2, Vec3, Vec4};
 use shadow_core::Aabb;
@@ -116,14 +119,37 @@ shadow_core::wgsl_struct! {
 /// continuous, also past the box's silhouette, where it extends the
 /// box's light-facing side; maps.wgsl's `receiver_height` is the same.
 pub fn receiver_height(o: Vec3, omega: Vec3, min: Vec3, max: Vec3) -> f32 {
-    let mut exit = f32::INFINITY;
+    crossing(o, omega, min, max).1
+}
+
+/// The heights (t) where the line {o + t ω} enters and leaves the box
+/// [min, max]: it meets the box where entry ≤ exit.
+fn crossing(o: Vec3, omega: Vec3, min: Vec3, max: Vec3) -> (f32, f32) {
+    let (mut entry, mut exit) = (f32::NEG_INFINITY, f32::INFINITY);
     for k in 0..3 {
         if omega[k].abs() > AXIS_EPSILON {
             let (a, b) = ((min[k] - o[k]) / omega[k], (max[k] - o[k]) / omega[k]);
+            entry = entry.max(a.min(b));
             exit = exit.min(a.max(b));
+        } else if o[k] < min[k] || o[k] > max[k] {
+            entry = f32::INFINITY;
         }
     }
-    exit
+    (entry, exit)
+}
+
+/// How far `point` stands in front of (toward the light from) the
+/// light-facing side of `other` on the line through it along ω, where
+/// that line meets `other`.
+fn in_front(point: Vec3, other: &Aabb, omega: Vec3) -> Option<f32> {
+    let height = point.dot(omega);
+    let (entry, exit) = crossing(point - height * omega, omega, other.min, other.max);
+    (entry <= exit).then_some(height - exit)
+}
+
+/// The least height x·ω over the box's corners.
+fn lowest_corner(b: &Aabb, omega: Vec3) -> f32 {
+    (b.min * omega).min(b.max * omega).element_sum()
 }
 
 /// Light direction components below this count as zero in
@@ -236,12 +262,33 @@ impl Plan {
                         continue;
                     }
                     let offset = occluder - centre;
-                    if offset.dot(omega) <= 0.0 {
+                    let height = occluder.dot(omega);
+                    let pad = DEPTH_PADDING * (occluder_radius + height.abs()) + 1e-6;
+                    let (near, far) = (
+                        height - occluder_radius - pad,
+                        height + occluder_radius + pad,
+                    );
+                    // The pair casts where the occluder stands in front of
+                    // the receiver: judged on the line through the
+                    // occluder's centre where it meets the receiver's box (a
+                    // sheet at the side of a floor, wherever the floor's
+                    // centre lies), else on the line through the receiver's
+                    // centre (a floor under an object, lit from above: the
+                    // object stands in front), else by the centres as the
+                    // paper's planes do. A tie (a floor under a post's
+                    // bottom face, lit from below) casts.
+                    let tie = 1e-4 * (far - near);
+                    let casts = match (
+                        in_front(occluder, receiver, omega),
+                        in_front(centre, &boxes[a], omega),
+                    ) {
+                        (Some(d), _) => d >= -tie,
+                        (None, Some(d)) => d <= tie,
+                        (None, None) => offset.dot(omega) > 0.0,
+                    };
+                    if !casts {
                         continue;
                     }
-                    let pad = DEPTH_PADDING * (occluder_radius + occluder.dot(omega).abs()) + 1e-6;
-                    let near = occluder.dot(omega) - occluder_radius - pad;
-                    let far = occluder.dot(omega) + occluder_radius + pad;
                     // The widest box: from the occluder's top to the lowest
                     // receiver height under its footprint, a square in the
                     // light's plane whose corners bound the concave height;
@@ -258,11 +305,7 @@ impl Plan {
                         })
                         .into_iter()
                         .fold(f32::INFINITY, f32::min)
-                        .max(
-                            (receiver.min * omega)
-                                .min(receiver.max * omega)
-                                .element_sum(),
-                        );
+                        .max(lowest_corner(receiver, omega));
                     let side = root * (far - lowest).max(0.0);
                     let apart = (offset - offset.dot(omega) * omega).length();
                     // A receiver point reads the occluder's footprint (a disc)
@@ -354,6 +397,39 @@ mod tests {
         // The ball's window under the floor's shadow is the ball's own.
         let below = plan.maps[1];
         assert_eq!((below.light, below.occluder, below.receiver), (1, 0, 1));
+    }
+
+    /// Which side of a pair is in front is decided where the occluder
+    /// stands over the receiver, not between the groups' centres: a sheet
+    /// at the floor's side, lit from the floor's centre at 45°, has its
+    /// centre behind the floor's (D < 0, the paper's planes), and still
+    /// shades the floor; the floor shades neither the sheet nor, from
+    /// above, a box standing on it.
+    #[test]
+    fn a_sheet_off_the_floors_centre_shades_it_under_a_slanted_light() {
+        let floor = Aabb {
+            min: Vec3::new(-1.0, 0.0, -1.0),
+            max: Vec3::new(1.0, 0.0, 1.0),
+        };
+        let sheet = Aabb {
+            min: Vec3::new(0.1, 0.25, -0.4),
+            max: Vec3::new(0.8, 0.252, 0.4),
+        };
+        let post = Aabb {
+            min: Vec3::new(-0.6, 0.0, -0.1),
+            max: Vec3::new(-0.4, 0.5, 0.1),
+        };
+        let objects = [floor, sheet, post];
+        let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &objects).unwrap();
+        let slanted = light(Vec3::new(-1.0, 1.0, 0.0), 0.1);
+        assert!((sheet.center() - floor.center()).dot(slanted.omega()) < 0.0);
+        let plan = Plan::new(&[slanted], &objects, &groups, 64);
+        let pairs: Vec<(u32, u32)> = plan.maps.iter().map(|m| (m.occluder, m.receiver)).collect();
+        assert!(pairs.contains(&(1, 0)), "{pairs:?}");
+        assert!(
+            !pairs.contains(&(0, 1)) && !pairs.contains(&(0, 2)),
+            "{pairs:?}"
+        );
     }
 
     #[test]

@@ -160,8 +160,14 @@ fn the_penumbra_widens_away_from_the_contact() {
     .unwrap();
     let floor = shapes::floor("floor", Vec3::ZERO, 4.0, 1).unwrap();
     let (plan, maps) = filtered_maps(&[floor, plate], light, n);
-    assert_eq!(plan.maps.len(), 1, "the plate onto the floor");
-    let map = plan.maps[0];
+    // The plate's map onto the floor, among the plan's.
+    let (index, map) = plan
+        .maps
+        .iter()
+        .copied()
+        .enumerate()
+        .find(|(_, m)| (m.occluder, m.receiver) == (1, 0))
+        .expect("the plate onto the floor");
     // The map at light-plane point `a`, bilinear (deferred.wgsl's map_at).
     let at = |a: Vec2| {
         let t = ((a - map.centre) * map.inverse_side + 0.5) * n as f32 - 0.5;
@@ -169,7 +175,7 @@ fn the_penumbra_widens_away_from_the_contact() {
         let (k, f) = (t.floor(), t - t.floor());
         let texel = |x: f32, y: f32| {
             let (x, y) = ((x as u32).min(n - 1), (y as u32).min(n - 1));
-            maps[(y * n + x) as usize]
+            maps[index * (n * n) as usize + (y * n + x) as usize]
         };
         let top = texel(k.x, k.y) * (1.0 - f.x) + texel(k.x + 1.0, k.y) * f.x;
         let bottom = texel(k.x, k.y + 1.0) * (1.0 - f.x) + texel(k.x + 1.0, k.y + 1.0) * f.x;
