@@ -14,18 +14,24 @@
 //! fall at the receiver's centre plane: a piece's foot on the board (D from
 //! the piece's middle), a piece at the corner of a large board under a
 //! slanted light (D off by the corner's offset along ω_i). Here each texel
-//! keeps its occluder's height along ω_i (the surface nearest the light, as
-//! a shadow map does), and the receiver's height on that texel's line is
-//! the light-facing side of B's bounding box; the map is then filtered as
-//! percentage-closer soft shadows prefiltered on a summed-area table: per
-//! texel, the mean height of the occluders within the widest penumbra
-//! gives the distance d and the box's side s = √Ω_i · d (a blend of the two
-//! odd integer boxes around s, half the table loads of a box with
-//! fractional corners; the texels whose widest box is empty or all covered
-//! skip it). The paper's fixed
-//! D is the case of a flat occluder over a receiver plane through B's
-//! centre. Occluder texels behind the receiver's surface (the board under a
-//! piece, as seen from a low light above) cast nothing.
+//! keeps its occluder's height along ω_i, and the receiver's height on
+//! that texel's line is the light-facing side of B's bounding box; the map
+//! is then filtered as percentage-closer soft shadows prefiltered on a
+//! summed-area table: per texel, the mean height of the occluders within
+//! the widest penumbra gives the distance d and the box's side
+//! s = √Ω_i · d (a blend of the two odd integer boxes around s, half the
+//! table loads of a box with fractional corners; texels whose widest box
+//! is empty or all covered skip it). The paper's fixed D is the case of a
+//! flat occluder over a receiver plane through B's centre. Occluder texels
+//! behind the receiver's surface (the board under a piece, as seen from a
+//! low light above) cast nothing.
+//!
+//! The height kept is that of the occluder's surface farthest from the
+//! light, not the nearest as a shadow map keeps: over a receiver under an
+//! overhang (the floor under the bunny's belly) the nearest surface is the
+//! occluder's top, and the blocker search would blur the shadow as if cast
+//! from there; on a convex occluder both meet at the silhouette, where the
+//! penumbra is.
 //!
 //! The paper sizes a map to its receiver. Here a map covers the smaller of
 //! two squares: the receiver's projected bounding sphere widened by half
@@ -34,13 +40,15 @@
 //! shadow falls instead of spreading them over the whole board; points
 //! outside the window read zero.
 //!
-//! A pair whose occluder's centre lies behind the receiver's surface on
-//! the line through it along ω_i (the light-facing side of B's box there)
-//! gets no map: the common case is a floor under an object, which must not
-//! darken the object for lights above. The paper's planes (D ≤ 0) would
-//! also drop a sheet at the side of a floor whose centre lies nearer a
-//! slanted light than the sheet's, and with it the sheet's shadow. Pairs
-//! whose filtered shadow cannot reach the receiver are skipped.
+//! A pair gets a map only where the occluder stands in front of the
+//! receiver (toward the light): judged on the line along ω_i through the
+//! occluder's centre where it meets B's box, else on the line through B's
+//! centre where it meets A's, else by the centres as the paper's planes
+//! (D > 0). A floor under an object, lit from above, casts nothing on it,
+//! and a sheet at the side of a floor shades the floor also where the
+//! floor's centre lies nearer a slanted light than the sheet's (the
+//! paper's planes drop that shadow). Pairs whose filtered shadow cannot
+//! reach the receiver are skipped.
 
 use glam::{Vec2, Vec3, Vec4};
 use shadow_core::Aabb;

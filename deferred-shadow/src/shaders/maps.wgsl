@@ -1,6 +1,6 @@
 // Occlusion maps (§4.2.2, §6.2.1): occluders projected along each light onto
-// their tile of a depth atlas (the height x·ω of the surface nearest the
-// light), then filtered into one array of maps by a box (eq. 5–6) whose
+// their tile of a depth atlas (the height x·ω of the occluder's surface
+// farthest from the light), then filtered into one array of maps by a box (eq. 5–6) whose
 // side follows each texel's occluder distance: percentage-closer soft
 // shadows on a summed-area table (maps.rs says where this departs from the
 // paper's one box per map).
@@ -15,8 +15,9 @@
 @group(0) @binding(6) var<storage, read> instances: array<u32>;
 
 struct Covered {
-    // z: the height, 0 at the map's `far` and 1 at its `near` (less is
-    // nearer the light and wins the depth test).
+    // z: the height, 0 at the map's `far` and 1 at its `near` (greater is
+    // farther from the light and wins the depth test; cleared to 0, no
+    // occluder).
     @builtin(position) position: vec4<f32>,
     // The tile's texel rectangle: (x0, y0, x1, y1).
     @location(0) @interpolate(flat) tile: vec4<f32>,
@@ -121,7 +122,7 @@ fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
         // post's bottom face, lit from below) counts, whatever the
         // rounding of the two heights: contact is occlusion.
         let tie = 1e-4 * (m.far - m.near);
-        if z < 1.0 && h >= receiver_height(m, light, plane_point(m, x, y - 1u)) - tie {
+        if z > 0.0 && h >= receiver_height(m, light, plane_point(m, x, y - 1u)) - tie {
             sum += vec2<f32>(1.0, h - m.near);
         }
         table[base + x + 1u] = sum;
