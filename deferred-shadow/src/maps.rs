@@ -160,6 +160,11 @@ fn lowest_corner(b: &Aabb, omega: Vec3) -> f32 {
     (b.min * omega).min(b.max * omega).element_sum()
 }
 
+/// Heights closer than this fraction of a map's depth range [near, far]
+/// are in contact, whatever their rounding, and contact occludes: in the
+/// plan's choice of pairs as in maps.wgsl's per-texel test.
+pub const TIE: f32 = 1e-4;
+
 /// Light direction components below this count as zero in
 /// [`receiver_height`].
 pub const AXIS_EPSILON: f32 = 1e-6;
@@ -285,7 +290,7 @@ impl Plan {
                     // object stands in front), else by the centres as the
                     // paper's planes do. A tie (a floor under a post's
                     // bottom face, lit from below) casts.
-                    let tie = 1e-4 * (far - near);
+                    let tie = TIE * (far - near);
                     let casts = match (
                         in_front(occluder, receiver, omega),
                         in_front(centre, &boxes[a], omega),

@@ -289,9 +289,8 @@ fn the_furnace_scene_gives_the_albedo() {
 /// (one map per light and receiver instead of one per piece) lose the
 /// shadows the pieces cast on each other, and the board reads one coarser
 /// map of all of them. What that costs in error is measured, whichever way
-/// it comes out (on this scene it lowers the error: the per-piece maps'
-/// plane approximation darkens neighbouring pieces more than the lost
-/// shadows do).
+/// it comes out (measured at 128 wide: 4.65% with the pieces apart, 638
+/// maps; 5.15% grouped, 34 maps).
 #[test]
 #[cfg_attr(
     skip_gpu_tests,

@@ -17,7 +17,7 @@ use shadow_core::gpu::wgsl::Source;
 use shadow_core::{Error, Result};
 
 use super::scene::{Scene, pulled_pipeline, shader};
-use crate::maps::{AXIS_EPSILON, Plan};
+use crate::maps::{AXIS_EPSILON, Plan, TIE};
 
 shadow_core::wgsl_struct! {
     /// One batch of maps in the atlas, as maps.wgsl reads it.
@@ -136,6 +136,7 @@ impl MapPass {
         let cs = wgpu::ShaderStages::COMPUTE;
         let body = Source::new()
             .float("AXIS_EPSILON", AXIS_EPSILON)
+            .float("TIE", TIE)
             .declare::<Atlas>()
             .body(include_str!("../shaders/maps.wgsl"));
         let module = shader(ctx, "occlusion maps", body);

@@ -5,7 +5,7 @@
 // shadows on a summed-area table (maps.rs says where this departs from the
 // paper's one box per map).
 
-// Atlas and AXIS_EPSILON are declared from Rust (gpu/map_pass.rs).
+// Atlas, AXIS_EPSILON and TIE are declared from Rust (gpu/map_pass.rs).
 
 @group(0) @binding(0) var<uniform> atlas: Atlas;
 @group(0) @binding(1) var<storage, read> vertices: array<GpuVertex>;
@@ -121,8 +121,7 @@ fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
         // An occluder level with the receiver's side (a floor under a
         // post's bottom face, lit from below) counts, whatever the
         // rounding of the two heights: contact is occlusion.
-        let tie = 1e-4 * (m.far - m.near);
-        if z > 0.0 && h >= receiver_height(m, light, plane_point(m, x, y - 1u)) - tie {
+        if z > 0.0 && h >= receiver_height(m, light, plane_point(m, x, y - 1u)) - TIE * (m.far - m.near) {
             sum += vec2<f32>(1.0, h - m.near);
         }
         table[base + x + 1u] = sum;
