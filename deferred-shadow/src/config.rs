@@ -12,7 +12,8 @@ pub enum Grouping {
     /// diagonal, so that flat objects have a volume) overlap by more than
     /// `overlap` of the smaller box's volume form one group: the two colours
     /// of a chess board, or parts of one figure, but not a piece standing
-    /// on the board.
+    /// on the board. The groups follow the objects: each frame whose poses
+    /// moved regroups them, and maps are kept only while the groups stay.
     Overlapping { overlap: f32 },
     /// The given groups of object indices; each object in exactly one.
     Explicit(Vec<Vec<usize>>),

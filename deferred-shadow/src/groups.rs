@@ -28,7 +28,8 @@ pub(crate) fn posed_bounds(model: Aabb, t: &Affine3A) -> Aabb {
 }
 
 impl Groups {
-    /// The groups [`crate::DeferredShadow`] forms for `scene`: each object's
+    /// The groups [`crate::DeferredShadow`] forms when it prepares `scene`
+    /// (it regroups at each frame whose poses moved): each object's
     /// mesh bounds posed at the first frame (the box of its eight corners
     /// turned by the pose), grouped by `grouping`. A deformed object (which
     /// the method refuses) counts with the bounds of its posed vertices.

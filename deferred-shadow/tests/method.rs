@@ -441,6 +441,81 @@ fn kept_maps_match_redrawn_ones() {
     }
 }
 
+/// A ball that flies into a post's bounding box joins its occluder group,
+/// and leaves it again when it flies out (§4.2.3's groups follow the
+/// objects): each frame's image is the one a fresh computation of that
+/// frame alone gives.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn regrouped_objects_match_a_fresh_computation() {
+    let ctx = test_context();
+    let ball = shapes::uv_sphere("ball", Vec3::new(-0.5, 0.4, 0.0), 0.3, 12, 24).unwrap();
+    let post = shapes::cuboid(
+        "post",
+        Vec3::new(0.4, 0.0, -0.1),
+        Vec3::new(0.6, 0.8, 0.1),
+        false,
+    )
+    .unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 1.5, 1).unwrap();
+    let objects: Vec<Object> = [ball, post, floor]
+        .into_iter()
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: white(),
+        })
+        .collect();
+    // Apart, the ball's box three quarters into the post's, apart again.
+    let poses = |x: f32| {
+        vec![
+            Pose::Rigid(Affine3A::from_translation(Vec3::X * x)),
+            Pose::Rigid(Affine3A::IDENTITY),
+            Pose::Rigid(Affine3A::IDENTITY),
+        ]
+    };
+    let frames: Vec<Frame> = [0.0, 1.0, 0.4]
+        .into_iter()
+        .enumerate()
+        .map(|(i, x)| Frame {
+            time: i as f32,
+            poses: poses(x),
+        })
+        .collect();
+    let scene = Scene::new(
+        "ball through a post",
+        objects.clone(),
+        frames.clone(),
+        camera(),
+    )
+    .unwrap();
+    let env = patchy();
+    let mut walked = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+    walked.prepare(&scene).unwrap();
+    walked.relight(&env).unwrap();
+    let mut groups = Vec::new();
+    for (f, frame) in frames.iter().enumerate() {
+        walked
+            .update(&scene.frame_geometry(f).unwrap(), scene.camera())
+            .unwrap();
+        groups.push(walked.groups().unwrap().to_vec());
+        let image = walked.render(scene.camera()).unwrap();
+
+        let alone =
+            Scene::new("this frame", objects.clone(), vec![frame.clone()], camera()).unwrap();
+        let mut fresh = DeferredShadow::new(Arc::clone(&ctx), Config::default()).unwrap();
+        run(&mut fresh, &alone, &env);
+        assert_eq!(fresh.groups(), walked.groups(), "frame {f}");
+        let expected = fresh.render(scene.camera()).unwrap();
+        for (a, b) in image.pixels.iter().zip(&expected.pixels) {
+            assert_relative_eq!(*a, *b, epsilon = 1e-5);
+        }
+    }
+    assert_eq!(groups, [vec![0, 1, 2], vec![0, 0, 1], vec![0, 1, 2]]);
+}
+
 /// A sky whose light comes mostly from a sun 6° across in direction `sun`.
 fn sunny(sun: Vec3) -> Environment {
     use std::f32::consts::{PI, TAU};

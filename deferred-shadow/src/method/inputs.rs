@@ -6,8 +6,11 @@ use std::time::Instant;
 use glam::{Affine3A, Mat3, Mat4};
 use shadow_core::{Capability, Environment, Error, FrameGeometry, Result, Stage};
 
+use super::refresh::world_bounds;
 use super::{DeferredShadow, Lit, Posed};
+use crate::Grouping;
 use crate::gpu::GpuObject;
+use crate::groups::Groups;
 use crate::lights::decompose;
 use crate::maps::GpuLight;
 use crate::name::NAME;
@@ -63,7 +66,8 @@ impl DeferredShadow {
         Ok(())
     }
 
-    /// Takes the poses of `frame`.
+    /// Takes the poses of `frame`; under [`Grouping::Overlapping`] the
+    /// objects are regrouped when any of them moved.
     pub(super) fn pose(&mut self, frame: &FrameGeometry) -> Result<()> {
         let scene = self
             .scene
@@ -97,9 +101,10 @@ impl DeferredShadow {
             posed.radiance = (0..poses.len()).map(|_| None).collect();
             posed.weights_stale = vec![true; poses.len()];
         }
+        let mut moved = fresh;
         for (o, &(t, r)) in poses.iter().enumerate() {
             if fresh || posed.transforms[o] != t {
-                posed.maps_ready = false;
+                moved = true;
             }
             if fresh || posed.rotations[o] != r {
                 posed.radiance[o] = None;
@@ -108,6 +113,27 @@ impl DeferredShadow {
         }
         posed.transforms = poses.iter().map(|p| p.0).collect();
         posed.rotations = poses.iter().map(|p| p.1).collect();
+        if moved {
+            posed.maps_ready = false;
+            // The groups follow the poses (§4.2.3 clusters the occluders
+            // that are near each other, wherever they are now): objects
+            // that came together or apart are regrouped, and no map of the
+            // old groups is kept.
+            if matches!(self.config.grouping, Grouping::Overlapping { .. }) {
+                let start = Instant::now();
+                let bounds = world_bounds(&scene.parts, &posed.transforms);
+                let groups = Groups::new(&self.config.grouping, &bounds)?;
+                if groups != scene.groups {
+                    scene.groups = groups;
+                    posed.planned = None;
+                }
+                self.profile.seconds(
+                    Stage::Update,
+                    "occluder groups (CPU)",
+                    start.elapsed().as_secs_f64(),
+                );
+            }
+        }
         let objects: Vec<GpuObject> = scene
             .parts
             .iter()

@@ -153,7 +153,7 @@ impl DeferredShadow {
         self.scene.as_ref().map(|s| s.gpu.map_count())
     }
 
-    /// The occluder groups: the group of each object.
+    /// The occluder groups of the current frame: the group of each object.
     pub fn groups(&self) -> Option<&[u32]> {
         self.scene.as_ref().map(|s| s.groups.of_object.as_slice())
     }
