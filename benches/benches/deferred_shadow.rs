@@ -7,12 +7,16 @@
 //! - `fig7/<model>-<material>`: one 512×512 frame (update with the object
 //!   moved, so every map is rebuilt, then render) for q = 16, 32, 64 area
 //!   lights and maps of 32², 64², 128², diffuse and glossy.
+//! - equal error (printed): deferred-shadow against the per-pixel ray
+//!   tracer at the same image error on `chess` (each piece apart, and the
+//!   pieces as one group, §4.2.3) and `bunny`, at 160, 512 and 1024 pixels
+//!   wide, the ray tracer's time interpolated along its settings' errors
+//!   (references of frame 0 at each width, 1% noise, cached in the
+//!   workspace's `.cache/reference`).
 //! - `chess`: a 512-wide frame of the chess scene under its `interior`
 //!   map, frames in turn (three pieces move), at 32 lights and 64² maps,
 //!   with each piece its own occluder group and with the eight pieces as
-//!   one (§4.2.3); each beside the per-pixel ray tracer at the fewest
-//!   iterations whose image error is no larger (against a 1%-noise
-//!   reference of frame 0, cached in `.cache/reference`).
+//!   one.
 //!
 //! Run with `cargo bench -p benches --bench deferred_shadow`. Without a GPU
 //! the adapter is Mesa's software rasterizer: the times are CPU times.
@@ -25,13 +29,15 @@ use deferred_shadow::{Config, DeferredShadow, Grouping};
 use glam::{Affine3A, Vec3};
 use harness::{
     baselines::RayTrace,
-    reference::{ReferenceCache, ReferenceSettings, scene_image_references},
-    report::MachineInfo,
-    scenes, score,
+    reference::{ImageReference, ReferenceCache, ReferenceSettings, frame_image_reference},
+    report::{MachineInfo, Overtakes, equal_error_ms, overtakes},
+    scaling, scenes, score,
+    timing::Timing,
 };
 use indicatif::ProgressBar;
 use shadow_core::{
-    Brdf, Camera, Frame, FrameGeometry, Object, Pose, Scene, ShadowMethod, gpu::GpuContext, shapes,
+    Brdf, Camera, Environment, Frame, FrameGeometry, Object, Pose, Scene, ShadowMethod,
+    gpu::GpuContext, shapes,
 };
 
 /// Image side of the paper's measurements.
@@ -175,28 +181,30 @@ fn chess_groupings(scene: &Scene) -> [(&'static str, Grouping); 2] {
     ]
 }
 
-fn chess(c: &mut Criterion, ctx: &Arc<GpuContext>) {
-    let spec = scenes::SCENES
+/// The `chess` scene at `width` pixels wide (its camera's aspect kept) and
+/// its shipped environment.
+fn chess_scene(width: u32) -> (Scene, Environment) {
+    let scene = scenes::builtin("chess").expect("built-in scene");
+    let camera = scene.camera().with_width(width).expect("camera");
+    let env = scenes::environment(environment_of("chess")).expect("shipped environment");
+    (scene.with_camera(camera), env)
+}
+
+fn environment_of(scene: &str) -> &'static str {
+    scenes::SCENES
         .iter()
-        .find(|s| s.name == "chess")
-        .expect("built-in scene");
-    let scene = scenes::builtin(spec.name).expect("built-in scene");
-    let camera = scene.camera().with_width(SIDE).expect("camera");
-    let scene = scene.with_camera(camera);
-    let env = scenes::environment(spec.environment).expect("shipped environment");
+        .find(|s| s.name == scene)
+        .expect("built-in scene")
+        .environment
+}
+
+/// A `SIDE`-wide frame of `chess`, frames in turn, each piece apart and
+/// the pieces grouped.
+fn chess(c: &mut Criterion, ctx: &Arc<GpuContext>) {
+    let (scene, env) = chess_scene(SIDE);
     let frames = frames(&scene);
-    let cache = ReferenceCache::new(".cache/reference");
-    let (references, _) = scene_image_references(
-        &scene,
-        &env,
-        &camera,
-        &ReferenceSettings::IMAGE,
-        Some(&cache),
-        &ProgressBar::hidden(),
-    )
-    .expect("image reference");
-    let reference = &references[0];
     let mut group = c.benchmark_group("chess");
+    group.sample_size(20);
     for (name, grouping) in chess_groupings(&scene) {
         let config = Config {
             grouping,
@@ -205,51 +213,165 @@ fn chess(c: &mut Criterion, ctx: &Arc<GpuContext>) {
         let mut method = DeferredShadow::new(Arc::clone(ctx), config).expect("config");
         method.prepare(&scene).expect("prepare");
         method.relight(&env).expect("relight");
-        method.update(&frames[0], &camera).expect("update");
-        let ours = score::image(&method.render(&camera).expect("render"), reference)
-            .expect("score")
-            .relative_l2;
+        method.update(&frames[0], scene.camera()).expect("update");
         println!(
-            "chess, {name}: {} maps, image error {:.2}% on frame 0 at {}×{}",
+            "chess, {name}: {} maps at {}×{}",
             method.map_count().unwrap_or(0),
-            100.0 * ours,
-            camera.width,
-            camera.height
+            scene.camera().width,
+            scene.camera().height
         );
-        group.sample_size(20);
         let mut next = 0;
         group.bench_function(name, |b| {
             b.iter(|| frame_loop(&mut method, &scene, &frames, &mut next))
         });
-        // The per-pixel ray tracer at the fewest iterations that reach the
-        // same image error.
-        let mut iterations = 1;
-        let (mut tracer, error) = loop {
-            let mut tracer = RayTrace::new(iterations, 7);
-            tracer.prepare(&scene).expect("prepare");
-            tracer.relight(&env).expect("relight");
-            tracer.update(&frames[0], &camera).expect("update");
-            let error = score::image(&tracer.render(&camera).expect("render"), reference)
-                .expect("score")
-                .relative_l2;
-            if error <= ours || iterations >= 1 << 12 {
-                break (tracer, error);
-            }
-            iterations *= 2;
-        };
-        println!(
-            "chess, {name}: raytrace:{iterations} reaches {:.2}%",
-            100.0 * error
-        );
-        group.sample_size(10);
-        group.bench_function(format!("raytrace:{iterations} ({name})"), |b| {
-            b.iter(|| {
-                tracer.update(&frames[0], &camera).expect("update");
-                tracer.render(&camera).expect("render")
-            })
-        });
     }
     group.finish();
+}
+
+/// Widths of the equal-error comparison: the report's, the paper's and a
+/// renderer's.
+const WIDTHS: [u32; 3] = [160, 512, 1024];
+
+/// Iterations per pixel of the ray tracer settings whose errors bracket
+/// deferred-shadow's on `chess` and `bunny`.
+const TRACER_ITERATIONS: [u32; 3] = [16, 64, 256];
+
+/// A setting's image error on the first frame and its time per image
+/// (update + render of a fresh frame), per width of [`WIDTHS`].
+struct Curve {
+    name: String,
+    points: Vec<(f32, Timing)>,
+}
+
+fn curve(
+    name: String,
+    method: &mut dyn ShadowMethod,
+    scene: &Scene,
+    env: &Environment,
+    references: &[ImageReference],
+) -> Curve {
+    let times = scaling::time_images(method, scene, env, &WIDTHS, 3).expect("timed images");
+    let frame = scene.frame_geometry(0).expect("frame");
+    let points = times
+        .into_iter()
+        .zip(references)
+        .map(|(at, reference)| {
+            let camera = scene.camera().with_width(at.width).expect("camera");
+            method.update(&frame, &camera).expect("update");
+            let image = method.render(&camera).expect("render");
+            let error = score::image(&image, reference).expect("score").relative_l2;
+            (error, at.time)
+        })
+        .collect();
+    Curve { name, points }
+}
+
+/// Deferred-shadow against the per-pixel ray tracer at equal image error,
+/// as the image grows: per scene and width, both scored against that
+/// width's reference and timed in this process, the ray tracer's time read
+/// off its settings' (error, time) curve at deferred-shadow's error
+/// (log-log between the settings around it, [`equal_error_ms`]). Printed
+/// as a table; each time a median of three samples with its range.
+fn equal_error(ctx: &Arc<GpuContext>) {
+    // The workspace's cache, which `harness report` shares (benches run in
+    // their package's folder).
+    let cache = ReferenceCache::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.cache/reference"));
+    println!("Equal image error (frame 0; ms per image, update + render, median of 3 and range):");
+    println!(
+        "| scene | setting | width | error | ms | ray tracer at that error, ms | times faster |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|");
+    for name in ["chess", "bunny"] {
+        let scene = scenes::builtin(name).expect("built-in scene");
+        let env = scenes::environment(environment_of(name)).expect("shipped environment");
+        let groupings = match name {
+            "chess" => chess_groupings(&scene).to_vec(),
+            _ => vec![("deferred-shadow", Config::default().grouping)],
+        };
+        let frame = scene.frame_geometry(0).expect("frame");
+        let references: Vec<ImageReference> = WIDTHS
+            .iter()
+            .map(|&width| {
+                let camera = scene.camera().with_width(width).expect("camera");
+                frame_image_reference(
+                    &scene,
+                    &frame,
+                    &env,
+                    &camera,
+                    &ReferenceSettings::IMAGE,
+                    Some(&cache),
+                    &ProgressBar::hidden(),
+                )
+                .expect("image reference")
+                .0
+            })
+            .collect();
+        let tracers: Vec<Curve> = TRACER_ITERATIONS
+            .iter()
+            .map(|&iterations| {
+                let mut tracer = RayTrace::new(iterations, 7);
+                curve(
+                    format!("raytrace:{iterations}"),
+                    &mut tracer,
+                    &scene,
+                    &env,
+                    &references,
+                )
+            })
+            .collect();
+        for (name, grouping) in groupings {
+            let config = Config {
+                grouping,
+                ..Config::default()
+            };
+            let mut method = DeferredShadow::new(Arc::clone(ctx), config).expect("config");
+            let ours = curve(name.to_string(), &mut method, &scene, &env, &references);
+            let mut ratios = Vec::new();
+            for (w, (error, time)) in ours.points.iter().enumerate() {
+                let at: Vec<(f32, f64)> = tracers
+                    .iter()
+                    .map(|t| (t.points[w].0, t.points[w].1.median() * 1e3))
+                    .collect();
+                let (tracer_ms, beyond) = equal_error_ms(&at, *error).expect("ray tracer timed");
+                let ms = time.median() * 1e3;
+                ratios.push((f64::from(WIDTHS[w]), ms / tracer_ms));
+                println!(
+                    "| {} | {} | {} | {:.2}% | {:.1} ({:.1}–{:.1}) | {}{:.1} | {:.1}× |",
+                    scene.name(),
+                    ours.name,
+                    WIDTHS[w],
+                    100.0 * error,
+                    ms,
+                    time.min() * 1e3,
+                    time.max() * 1e3,
+                    if beyond { "≈" } else { "" },
+                    tracer_ms,
+                    tracer_ms / ms
+                );
+            }
+            let wins = match overtakes(&ratios) {
+                Overtakes::Everywhere => format!("at every width from {}", WIDTHS[0]),
+                Overtakes::From(w) => format!("from about {w:.0} pixels wide"),
+                Overtakes::Never => format!("at no width up to {}", WIDTHS[WIDTHS.len() - 1]),
+            };
+            println!(
+                "  {}, {}: faster than the ray tracer {wins}",
+                scene.name(),
+                ours.name
+            );
+        }
+        for t in &tracers {
+            let errors: Vec<String> = t
+                .points
+                .iter()
+                .zip(WIDTHS)
+                .map(|((e, time), w)| {
+                    format!("{w}: {:.2}% {:.1} ms", 100.0 * e, time.median() * 1e3)
+                })
+                .collect();
+            println!("  {}, {}: {}", scene.name(), t.name, errors.join(", "));
+        }
+    }
 }
 
 fn benches(c: &mut Criterion) {
@@ -260,6 +382,7 @@ fn benches(c: &mut Criterion) {
         MachineInfo::cpu_generation()
     );
     table1(&ctx);
+    equal_error(&ctx);
     chess(c, &ctx);
     fig7(c, &ctx);
 }
