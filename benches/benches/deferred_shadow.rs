@@ -281,6 +281,7 @@ fn equal_error(ctx: &Arc<GpuContext>) {
         "| scene | setting | width | error | ms | ray tracer at that error, ms | times faster |"
     );
     println!("|---|---|---:|---:|---:|---:|---:|");
+    let mut notes = Vec::new();
     for name in ["chess", "bunny"] {
         let scene = scenes::builtin(name).expect("built-in scene");
         let env = scenes::environment(environment_of(name)).expect("shipped environment");
@@ -354,11 +355,11 @@ fn equal_error(ctx: &Arc<GpuContext>) {
                 Overtakes::From(w) => format!("from about {w:.0} pixels wide"),
                 Overtakes::Never => format!("at no width up to {}", WIDTHS[WIDTHS.len() - 1]),
             };
-            println!(
-                "  {}, {}: faster than the ray tracer {wins}",
+            notes.push(format!(
+                "- {}, {}: faster than the ray tracer {wins}",
                 scene.name(),
                 ours.name
-            );
+            ));
         }
         for t in &tracers {
             let errors: Vec<String> = t
@@ -369,8 +370,18 @@ fn equal_error(ctx: &Arc<GpuContext>) {
                     format!("{w}: {:.2}% {:.1} ms", 100.0 * e, time.median() * 1e3)
                 })
                 .collect();
-            println!("  {}, {}: {}", scene.name(), t.name, errors.join(", "));
+            notes.push(format!(
+                "- {}, {}: {}",
+                scene.name(),
+                t.name,
+                errors.join(", ")
+            ));
         }
+    }
+    // After the table, which they would break.
+    println!();
+    for note in notes {
+        println!("{note}");
     }
 }
 
