@@ -377,15 +377,8 @@ fn interpenetrating_objects_give_bounded_radiance() {
     );
 }
 
-/// Maps kept from the previous frame (their objects did not move) give the
-/// image a fresh computation of the frame gives.
-#[test]
-#[cfg_attr(
-    skip_gpu_tests,
-    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
-)]
-fn kept_maps_match_redrawn_ones() {
-    let ctx = test_context();
+/// A ball left of a post, both on a floor: the ball is object 0.
+fn ball_post_floor() -> Vec<Object> {
     let ball = shapes::uv_sphere("ball", Vec3::new(-0.5, 0.4, 0.0), 0.3, 12, 24).unwrap();
     let post = shapes::cuboid(
         "post",
@@ -395,13 +388,25 @@ fn kept_maps_match_redrawn_ones() {
     )
     .unwrap();
     let floor = shapes::floor("floor", Vec3::ZERO, 1.5, 1).unwrap();
-    let objects = [ball, post, floor]
+    [ball, post, floor]
         .into_iter()
         .map(|mesh| Object {
             mesh: Arc::new(mesh),
             material: white(),
         })
-        .collect();
+        .collect()
+}
+
+/// Maps kept from the previous frame (their objects did not move) give the
+/// image a fresh computation of the frame gives.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn kept_maps_match_redrawn_ones() {
+    let ctx = test_context();
+    let objects = ball_post_floor();
     let frames = (0..3)
         .map(|i| Frame {
             time: i as f32,
@@ -452,22 +457,7 @@ fn kept_maps_match_redrawn_ones() {
 )]
 fn regrouped_objects_match_a_fresh_computation() {
     let ctx = test_context();
-    let ball = shapes::uv_sphere("ball", Vec3::new(-0.5, 0.4, 0.0), 0.3, 12, 24).unwrap();
-    let post = shapes::cuboid(
-        "post",
-        Vec3::new(0.4, 0.0, -0.1),
-        Vec3::new(0.6, 0.8, 0.1),
-        false,
-    )
-    .unwrap();
-    let floor = shapes::floor("floor", Vec3::ZERO, 1.5, 1).unwrap();
-    let objects: Vec<Object> = [ball, post, floor]
-        .into_iter()
-        .map(|mesh| Object {
-            mesh: Arc::new(mesh),
-            material: white(),
-        })
-        .collect();
+    let objects = ball_post_floor();
     // Apart, the ball's box three quarters into the post's, apart again.
     let poses = |x: f32| {
         vec![
