@@ -28,16 +28,33 @@ pub(crate) fn posed_bounds(model: Aabb, t: &Affine3A) -> Aabb {
 }
 
 impl Groups {
-    /// The groups [`crate::DeferredShadow`] forms when it prepares `scene`
-    /// (it regroups at each frame whose poses moved): each object's
-    /// mesh bounds posed at the first frame (the box of its eight corners
-    /// turned by the pose), grouped by `grouping`. A deformed object (which
-    /// the method refuses) counts with the bounds of its posed vertices.
+    /// The groups [`crate::DeferredShadow`] forms when it prepares `scene`:
+    /// [`Groups::of_frame`] at the first frame.
     pub fn of_scene(grouping: &Grouping, scene: &Scene) -> Result<Groups> {
+        Groups::of_frame(grouping, scene, 0)
+    }
+
+    /// The groups of `scene`'s objects as posed at `frame` (the method
+    /// regroups at each frame whose poses moved): each object's mesh bounds
+    /// posed there (the box of its eight corners turned by the pose),
+    /// grouped by `grouping`. A deformed object (which the method refuses)
+    /// counts with the bounds of its posed vertices. Fails on a frame
+    /// the scene does not have.
+    pub fn of_frame(grouping: &Grouping, scene: &Scene, frame: usize) -> Result<Groups> {
+        let poses = &scene
+            .frames()
+            .get(frame)
+            .ok_or_else(|| {
+                Error::config(
+                    "deferred-shadow",
+                    format!("frame {frame} of a scene of {}", scene.frames().len()),
+                )
+            })?
+            .poses;
         let boxes: Vec<Aabb> = scene
             .objects()
             .iter()
-            .zip(&scene.frames()[0].poses)
+            .zip(poses)
             .map(|(object, pose)| match pose {
                 Pose::Rigid(t) => posed_bounds(object.mesh.bounds(), t),
                 Pose::Deformed { positions, .. } => Aabb::from_points(positions.iter().copied()),

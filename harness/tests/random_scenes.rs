@@ -85,10 +85,10 @@
 //! | | smooth | glossy | 0.1 | 0.07 (0.031, 0xc23ed94a7c895759) | 0.47 (0.235, 0xd02b205dba197462) | 0.25 (0.048) |
 //! | | sun | Lambert | 0.5 | 1.0 (0.50, 0x27df640661809db8; otherwise 0.177) | none (0.744, 0x80189cef40fdcfa0) | none (0.251, 0x511f7dead2183cab) |
 //! | | sun | glossy | 1 | 0.08 (0.039, 0x42dcb42d1add2976) | none (0.703, 0xe72b9f19c7d4d2b9) | none (0.292, 0xdbd560695ffacfd8) |
-//! | `deferred-shadow:q=8` | smooth | Lambert | 0.25 | 0.02 (never above `B`) | 0.87 (0.432, 0x1f278ffe46bc45db; grouped 3.70, 0x349fd861dfb2f4c2) | 0.43 (0.227, 0x1f278ffe46bc45db) |
-//! | | smooth | glossy | 0.25 | 0.05 (0.021, 0x0d0316fb88c24b5f) | 0.82 (0.407, 0x53af97cc2e9f1323; grouped 4.87, 0xd02b205dba197462) | 0.45 (0.241, 0x22bc7e91f6747f32) |
-//! | | sun | Lambert | 0.5 | 0.04 (0.016, 0x268567dcc97af44a) | none (0.515, 0x63811a0e0a3a23aa; grouped 2.84, 0x4134b92d6e5f5591) | none (0.430, 0x832af024e5da7bb0) |
-//! | | sun | glossy | 2 | 1.0 (0.50, 0xb0831c0dc4ca7063; 0.220 in the 3200) | none (2.98, 0xe72b9f19c7d4d2b9; grouped 5.17, 0xa301f08750b2efb6) | none (0.411, 0x1a75e2932ba21701) |
+//! | `deferred-shadow:q=8` | smooth | Lambert | 0.25 | 0.02 (never above `B`) | 0.87 (0.483, 0x7722262bab0c4f23; grouped 3.70, 0x349fd861dfb2f4c2) | 0.33 (0.126, 0x749b6881cabb6410) |
+//! | | smooth | glossy | 0.25 | 0.05 (0.022, 0x0d0316fb88c24b5f) | 0.82 (0.546, 0x7158be85220d1ca8; grouped 4.87, 0xd02b205dba197462) | 0.33 (0.129, 0x8c220f02e0de20c8) |
+//! | | sun | Lambert | 0.5 | 0.04 (0.016, 0x268567dcc97af44a) | none (0.710, 0xbe9d7701cf442d89; grouped 2.84, 0x4134b92d6e5f5591) | none (0.430, 0x832af024e5da7bb0) |
+//! | | sun | glossy | 2 | 1.0 (0.50, 0xb0831c0dc4ca7063; 0.220 in the 3200) | none (1.89, 0xe72b9f19c7d4d2b9; grouped 5.17, 0xa301f08750b2efb6) | none (0.410, 0x1a75e2932ba21701) |
 //! | `raytrace:4` | smooth | Lambert | 0.5 | 0.02 (never above `B`) | 0.54 (0.266) | 0.26 (0.052) |
 //! | | smooth | glossy | 2 | 0.02 (never above `B`) | 0.97 (0.481, 0x8ac81f853b13d12c) | 0.31 (0.101) |
 //! | | sun | Lambert | 1 | 0.13 (0.063, 0xa7a8592a6f4455a9) | none (1.10, 0x247e1b53c7cb99c7; 0.391 in the 3200) | none (0.112) |
@@ -96,13 +96,22 @@
 //!
 //! What the largest ones are:
 //!
+//! * `deferred-shadow`'s rows were measured again with its occluder depth
+//!   per texel, over 3123 of the scenes (the batch of seed 7 stops at
+//!   0x4d559bf38b18fa90, where `hemi-raster` now comes out at 56%), each
+//!   frame's groups taken as the method forms them at that frame: its
+//!   darkness fell (0.227 and 0.241 before) and its largest errors on
+//!   scenes without groups rose (0.432 and 0.407 before; the allowances
+//!   kept hold them). The largest are too bright: 0x7722262bab0c4f23,
+//!   three objects about 1 mm across, 23% brighter than the reference in
+//!   all, and 0x7158be85220d1ca8, a box over a glossy grid, 27%.
 //! * `deferred-shadow`'s errors of several hundred percent are objects
 //!   inside or through a larger one (0x4d559bf38b18fa90: a 6.6 m sphere and
 //!   a 12 m grid in an 84 m box): their bounding boxes overlap, so they
 //!   form one occluder group, whose members cast nothing on each other,
 //!   and the enclosed ones get the unoccluded light, 13 times the
 //!   reference on that sphere, an error with no bound as the reference
-//!   goes dark. On such scenes (grouped: 1341 of its 3581 frames) its
+//!   goes dark. On such scenes (grouped: 1283 of its 3501 frames in the 3123) its
 //!   error is not bounded; its upper bound and darkness are.
 //! * `occlusion-query`'s 87% is the same scene: the enclosed sphere got 3.3
 //!   times its reference light; `hemi-raster` 3.7% there.
@@ -199,8 +208,8 @@ fn tolerance(method: &str, light: Light, glossy: bool) -> Tolerance {
         (Family::Directions, false, true) => (0.1, 0.07, 0.47, 0.25),
         (Family::Directions, true, false) => (0.5, 1.0, f32::INFINITY, f32::INFINITY),
         (Family::Directions, true, true) => (1.0, 0.08, f32::INFINITY, f32::INFINITY),
-        (Family::AreaLights, false, false) => (0.25, 0.02, 0.87, 0.43),
-        (Family::AreaLights, false, true) => (0.25, 0.05, 0.82, 0.45),
+        (Family::AreaLights, false, false) => (0.25, 0.02, 0.87, 0.33),
+        (Family::AreaLights, false, true) => (0.25, 0.05, 0.82, 0.33),
         (Family::AreaLights, true, false) => (0.5, 0.04, f32::INFINITY, f32::INFINITY),
         (Family::AreaLights, true, true) => (2.0, 1.0, f32::INFINITY, f32::INFINITY),
         (Family::MonteCarlo, false, false) => (0.5, 0.02, 0.54, 0.26),
@@ -580,11 +589,12 @@ fn check_frame(
 }
 
 /// Whether `deferred-shadow` puts two of the scene's objects in one
-/// occluder group, whose members cast nothing on each other: its error is
-/// not bounded there.
-fn grouped(scene: &Scene) -> bool {
+/// occluder group at `frame` (its groups follow the objects), whose
+/// members cast nothing on each other: its error is not bounded there.
+fn grouped(scene: &Scene, frame: usize) -> bool {
     let grouping = deferred_shadow::Config::default().grouping;
-    let groups = deferred_shadow::Groups::of_scene(&grouping, scene).expect("overlap groups");
+    let groups =
+        deferred_shadow::Groups::of_frame(&grouping, scene, frame).expect("overlap groups");
     groups.members.iter().any(|members| members.len() > 1)
 }
 
@@ -600,7 +610,6 @@ fn check_scene(seed: u64) -> Result<(), TestCaseError> {
         .map_err(|e| fail(format!("reference: {e}")))?;
     let cpu_only = SharedGpu::new();
     let glossy = scene.objects().iter().any(|o| o.material.is_glossy());
-    let grouped = grouped(scene);
     // The light with nothing in the way, per frame: unshadowed's, or where
     // the reference (shadows and all) is brighter, the reference's.
     let mut unshadowed = methods::by_name("unshadowed", &cpu_only).expect("unshadowed builds");
@@ -640,11 +649,12 @@ fn check_scene(seed: u64) -> Result<(), TestCaseError> {
                 )));
             }
         };
-        let mut tolerance = tolerance(name, case.light, glossy);
-        if family(name) == Family::AreaLights && grouped {
-            tolerance.error = f32::INFINITY;
-        }
         for (frame, shading) in shadings.iter().enumerate() {
+            let grouped = grouped(scene, frame);
+            let mut tolerance = tolerance(name, case.light, glossy);
+            if family(name) == Family::AreaLights && grouped {
+                tolerance.error = f32::INFINITY;
+            }
             let needed = check_frame(
                 &tolerance,
                 &case,
