@@ -211,6 +211,18 @@ pub fn write_error_map(path: &Path, image: &Image, reference: &Image) -> Result<
     write_png_atomic(path, &rgb, width, height)
 }
 
+/// The heat map's sRGB colour of a pixel's relative error: Viridis over
+/// [`ERROR_SCALE`] in quarter-decade bands; grey for background (`None`).
+pub fn error_colour(error: Option<f32>) -> [u8; 3] {
+    match error {
+        Some(e) => {
+            let c = ViridisRGB.get_color(band(scale_position(e)));
+            [c.0, c.1, c.2]
+        }
+        None => [96, 96, 96],
+    }
+}
+
 /// Colours per decade of the heat map: a band is a quarter decade (so the
 /// eye reads levels, and maps of noisy errors compress).
 const BANDS_PER_DECADE: f32 = 4.0;
@@ -247,10 +259,8 @@ fn draw_error_map(
             (i as u32 % image_width) as i32,
             (i as u32 / image_width) as i32,
         );
-        let colour = match error {
-            Some(e) => ViridisRGB.get_color(band(scale_position(*e))),
-            None => RGBColor(96, 96, 96),
-        };
+        let [r, g, b] = error_colour(*error);
+        let colour = RGBColor(r, g, b);
         let corner = (x * zoom, y * zoom);
         map.draw(&Rectangle::new(
             [corner, (corner.0 + zoom, corner.1 + zoom)],

@@ -22,3 +22,5 @@ pub mod scenes;
 pub mod score;
 pub mod suite;
 pub mod timing;
+#[cfg(feature = "viewer")]
+pub mod viewer;

@@ -15,6 +15,8 @@ mod args;
 mod bake;
 mod report;
 mod run;
+#[cfg(feature = "viewer")]
+mod view;
 
 use std::path::PathBuf;
 
@@ -85,6 +87,12 @@ enum Command {
     /// accuracy.json and accuracy.png and .svg (time against error) into
     /// --out-dir.
     Accuracy(accuracy::AccuracyArgs),
+    /// Show a scene with a method's result in a window: switch methods
+    /// (keys 1–5 or any name), orbit (drag), turn the environment (← →),
+    /// play the animation (space), show the error against a cached image
+    /// reference (H); with --screenshot, draw offscreen and write a PNG.
+    #[cfg(feature = "viewer")]
+    View(view::ViewArgs),
 }
 
 /// Parses the process's arguments and runs the command, with `methods` the
@@ -103,6 +111,8 @@ pub fn main(methods: Methods) -> Result<()> {
         Command::Report(args) => report::report(args, &methods, &progress),
         Command::BenchTable { criterion_dir, out } => bench_table(&criterion_dir, out),
         Command::Accuracy(args) => accuracy::accuracy(args, &methods, &progress),
+        #[cfg(feature = "viewer")]
+        Command::View(args) => view::view(args, &methods),
     }
 }
 

@@ -16,7 +16,7 @@ use std::{fmt, sync::Arc};
 use occlusion_query::OcclusionQuery;
 use shadow_core::{
     Error, Result, ShadowMethod,
-    gpu::GpuContext,
+    gpu::{GpuContext, GpuStages},
     name::{MethodName, closest},
     sh::ShOrder,
 };
@@ -28,7 +28,7 @@ pub use shared_gpu::SharedGpu;
 type MakeCpu = dyn Fn() -> Box<dyn ShadowMethod> + Send + Sync;
 
 /// Makes a GPU method on a device.
-type MakeGpu = dyn Fn(Arc<GpuContext>) -> Result<Box<dyn ShadowMethod>> + Send + Sync;
+type MakeGpu = dyn Fn(Arc<GpuContext>) -> Result<Box<dyn GpuStages>> + Send + Sync;
 
 /// How a [`MethodSpec`] builds its method.
 #[derive(Clone)]
@@ -45,11 +45,43 @@ impl Build {
         Build::Cpu(Arc::new(make))
     }
 
-    /// A GPU method made by `make` on the run's device.
+    /// A GPU method made by `make` on the run's device; its stages can
+    /// also be recorded into a host's encoder ([`Built::Gpu`]).
     pub fn gpu(
-        make: impl Fn(Arc<GpuContext>) -> Result<Box<dyn ShadowMethod>> + Send + Sync + 'static,
+        make: impl Fn(Arc<GpuContext>) -> Result<Box<dyn GpuStages>> + Send + Sync + 'static,
     ) -> Build {
         Build::Gpu(Arc::new(make))
+    }
+}
+
+/// A built method, with what a host can do with it: a CPU method's stages
+/// are calls, a GPU method's stages can also be recorded into the host's
+/// own command encoder ([`GpuStages`]).
+pub enum Built {
+    Cpu(Box<dyn ShadowMethod>),
+    Gpu(Box<dyn GpuStages>),
+}
+
+impl Built {
+    pub fn method(&self) -> &dyn ShadowMethod {
+        match self {
+            Built::Cpu(m) => m.as_ref(),
+            Built::Gpu(m) => m.as_ref(),
+        }
+    }
+
+    pub fn method_mut(&mut self) -> &mut dyn ShadowMethod {
+        match self {
+            Built::Cpu(m) => m.as_mut(),
+            Built::Gpu(m) => m.as_mut(),
+        }
+    }
+
+    pub fn into_method(self) -> Box<dyn ShadowMethod> {
+        match self {
+            Built::Cpu(m) => m,
+            Built::Gpu(m) => m,
+        }
     }
 }
 
@@ -123,10 +155,17 @@ impl MethodSpec {
     /// method calls itself by another name than the spec's: a family's
     /// method prints the name it was read from.
     pub fn build(&self, gpu: &SharedGpu) -> Result<Box<dyn ShadowMethod>> {
-        let method = match &self.build {
-            Build::Cpu(make) => make(),
-            Build::Gpu(make) => make(gpu.get()?)?,
+        self.build_stages(gpu).map(Built::into_method)
+    }
+
+    /// Builds the method as [`MethodSpec::build`] does, keeping a GPU
+    /// method's recordable stages.
+    pub fn build_stages(&self, gpu: &SharedGpu) -> Result<Built> {
+        let built = match &self.build {
+            Build::Cpu(make) => Built::Cpu(make()),
+            Build::Gpu(make) => Built::Gpu(make(gpu.get()?)?),
         };
+        let method = built.method();
         if method.name() != self.name {
             return Err(Error::config(
                 &self.name,
@@ -137,7 +176,7 @@ impl MethodSpec {
                 ),
             ));
         }
-        Ok(method)
+        Ok(built)
     }
 }
 
@@ -195,8 +234,7 @@ impl Methods {
                     |text| {
                         let config = occlusion_query::Config::from_name(text)?;
                         let build = Build::gpu(move |gpu| {
-                            Ok(Box::new(OcclusionQuery::new(gpu, config)?)
-                                as Box<dyn ShadowMethod>)
+                            Ok(Box::new(OcclusionQuery::new(gpu, config)?) as Box<dyn GpuStages>)
                         });
                         Ok((config.name(), build))
                     },
@@ -210,7 +248,7 @@ impl Methods {
                         let name = config.name();
                         let build = Build::gpu(move |gpu| {
                             let method = deferred_shadow::DeferredShadow::new(gpu, config.clone())?;
-                            Ok(Box::new(method) as Box<dyn ShadowMethod>)
+                            Ok(Box::new(method) as Box<dyn GpuStages>)
                         });
                         Ok((name, build))
                     },

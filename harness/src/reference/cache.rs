@@ -158,6 +158,16 @@ impl ReferenceCache {
         Ok((fresh, false))
     }
 
+    /// The cached image reference for `key` (of a `width × height` image),
+    /// if a valid one is stored; computes nothing.
+    pub fn cached_image(
+        &self,
+        key: &blake3::Hash,
+        (width, height): (u32, u32),
+    ) -> Option<ImageReference> {
+        self.read(key).and_then(|r| r.into_image(width, height))
+    }
+
     pub fn dir(&self) -> &Path {
         &self.dir
     }

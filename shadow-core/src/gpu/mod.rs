@@ -445,7 +445,8 @@ fn error_message(error: &wgpu::Error) -> String {
 
 /// The variable that lets the tests skip what the machine lacks: a
 /// comma-separated list of `gpu` (no adapter), `gltf-tools` (the npm glTF
-/// tools), `browser` (Chromium and playwright-core), or `all`. The build
+/// tools), `browser` (Chromium and playwright-core), `display` (Xvfb and
+/// xdotool, for the viewer's window), or `all`. The build
 /// script of each crate with such tests reads it and marks the tests that
 /// need a listed thing as ignored, so that `cargo test` reports them as
 /// skipped, not passed; a README example that needs a GPU is then left out
