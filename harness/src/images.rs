@@ -141,6 +141,17 @@ pub fn write_png(path: &Path, image: &Image, exposure: Exposure) -> Result<()> {
     write_png_atomic(path, &rgb, image.width, image.height)
 }
 
+/// The linear value of an 8-bit sRGB level: the inverse of the encoding the
+/// PNGs are written with.
+pub fn linear_from_srgb(level: u8) -> f32 {
+    let v = f32::from(level) / 255.0;
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// The sRGB encoding of a linear value in [0, 1] (clipped).
 fn srgb(linear: f32) -> u8 {
     let v = linear.clamp(0.0, 1.0);

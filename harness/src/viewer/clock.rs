@@ -39,11 +39,6 @@ impl Clock {
         samples.push_back(time.as_secs_f64() * 1e3);
     }
 
-    /// Forgets every sample (a new method).
-    pub fn clear(&mut self) {
-        self.rows.clear();
-    }
-
     pub fn summaries(&self) -> Vec<Summary> {
         self.rows
             .iter()

@@ -12,7 +12,6 @@ use shadow_core::{
         GpuContext,
         binding::{entry, group, group_layout, pipeline_layout, storage, texture, uniform},
     },
-    raster::clip_from_world,
 };
 
 /// The depth buffer's format.
@@ -41,6 +40,8 @@ pub enum Content<'a> {
         texture: &'a wgpu::Texture,
         scale: f32,
     },
+    /// Nothing: the environment alone.
+    Background,
 }
 
 /// How the picture is seen: through `camera` (its size the target's), the
@@ -112,7 +113,7 @@ impl Renderer {
                         format: DEPTH,
                         depth_write_enabled: Some(depth_write),
                         depth_compare: Some(if depth_write {
-                            wgpu::CompareFunction::Less
+                            wgpu::CompareFunction::Greater
                         } else {
                             wgpu::CompareFunction::Always
                         }),
@@ -290,10 +291,10 @@ impl Renderer {
         let half_w = half_h * camera.aspect();
         let picture_scale = match content {
             Content::Pixels { scale, .. } => scale,
-            Content::Vertices(_) => 1.0,
+            Content::Vertices(_) | Content::Background => 1.0,
         };
         let block = ViewBlock {
-            clip_from_world: clip_from_world(camera, near).to_cols_array_2d(),
+            clip_from_world: reversed_clip_from_world(camera, near).to_cols_array_2d(),
             forward: forward.extend(exposure).to_array(),
             right: (right * half_w).extend(picture_scale).to_array(),
             up: (up * half_h).extend(0.0).to_array(),
@@ -311,6 +312,7 @@ impl Renderer {
         let (colours, picture) = match content {
             Content::Vertices(buffer) => (buffer, &self.empty_texture),
             Content::Pixels { texture, .. } => (&self.empty_buffer, texture),
+            Content::Background => (&self.empty_buffer, &self.empty_texture),
         };
         let positions = self.positions.as_ref().unwrap_or(&self.empty_buffer);
         let environment_view = environment.create_view(&Default::default());
@@ -341,7 +343,7 @@ impl Renderer {
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &depth,
                 depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
+                    load: wgpu::LoadOp::Clear(0.0),
                     store: wgpu::StoreOp::Discard,
                 }),
                 stencil_ops: None,
@@ -365,6 +367,7 @@ impl Renderer {
                 pass.set_pipeline(&self.picture);
                 pass.draw(0..3, 0..1);
             }
+            Content::Background => {}
         }
     }
 
@@ -386,6 +389,19 @@ impl Renderer {
             .expect("set above")
             .create_view(&Default::default())
     }
+}
+
+/// `shadow_core::raster::clip_from_world`'s x and y, so that the picture
+/// lines up with the rasterizer's and the reference's, with depth reversed
+/// (1 at `near`, falling toward 0 at infinity): 32-bit float depth then
+/// keeps its precision far from the eye, where surfaces a scene apart
+/// would otherwise fight.
+fn reversed_clip_from_world(camera: &Camera, near: f32) -> glam::Mat4 {
+    glam::camera::rh::proj::directx::perspective_infinite_reverse(
+        camera.fov_y,
+        camera.aspect(),
+        near,
+    ) * camera.view()
 }
 
 /// Writes `texels` (`Rgba32Float`, row 0 first) into `target`.

@@ -10,17 +10,41 @@
 //! (`draw.wgsl` here). A CPU method's stages are plain calls, and its result
 //! is uploaded.
 //!
-//! ```text
-//! let ctx = Arc::new(GpuContext::from_device(device.clone(), queue.clone()));
-//! let mut method = harness::methods::parse("deferred-shadow")?
-//!     .build_stages(&SharedGpu::with(ctx))?;
-//! method.method_mut().prepare(&scene)?;            // once per scene
-//! // every frame:
-//! let mut encoder = device.create_command_encoder(&Default::default());
-//! let work = Work { relight: changed_env, update: changed_frame, camera: &camera, per_pixel: true };
-//! let output = drive(&mut method, &mut encoder, &work)?;   // records, or calls
-//! // … the host's passes read `output` …
-//! queue.submit([encoder.finish()]);
+//! ```no_run
+//! use std::sync::Arc;
+//!
+//! use harness::methods::{self, SharedGpu};
+//! use harness::viewer::host::{Output, Work, drive};
+//! use shadow_core::{Environment, Scene, gpu::GpuContext};
+//!
+//! fn first_frame(
+//!     device: &wgpu::Device,
+//!     queue: &wgpu::Queue,
+//!     scene: &Scene,
+//!     environment: &Environment,
+//! ) -> shadow_core::Result<()> {
+//!     // The methods live on the renderer's own device.
+//!     let ctx = Arc::new(GpuContext::from_device(device.clone(), queue.clone()));
+//!     let mut method = methods::parse("deferred-shadow")?.build_stages(&SharedGpu::with(ctx))?;
+//!     method.method_mut().prepare(scene)?; // once per scene
+//!
+//!     // Every frame: what changed, what is shown.
+//!     let (frame, camera) = (scene.frame_geometry(0)?, *scene.camera());
+//!     let mut encoder = device.create_command_encoder(&Default::default());
+//!     let work = Work {
+//!         relight: Some(environment),
+//!         update: Some(&frame),
+//!         camera: &camera,
+//!         per_pixel: true,
+//!     };
+//!     let (output, _times) = drive(&mut method, &mut encoder, &work, false)?;
+//!     if let Output::GpuImage(texture) = output {
+//!         // … the renderer's passes bind `texture` (Rgba32Float, alpha = coverage) …
+//!         let _ = texture;
+//!     }
+//!     queue.submit([encoder.finish()]);
+//!     Ok(())
+//! }
 //! ```
 //!
 //! [`GpuStages`]: shadow_core::gpu::GpuStages
@@ -43,41 +67,47 @@ pub struct Work<'a> {
     pub per_pixel: bool,
 }
 
-/// A frame's result, where the method left it.
-pub enum Output<'m> {
+/// A frame's result, where the method left it. GPU buffers and textures are
+/// handles to the method's own (cloning one copies no data); each is
+/// rewritten by the method's next recording.
+pub enum Output {
     /// Per-vertex radiance on the GPU: one `vec4<f32>` per vertex, every
     /// object's vertices one after another, written when the encoder runs.
-    GpuVertices(&'m wgpu::Buffer),
+    GpuVertices(wgpu::Buffer),
     /// A per-pixel image on the GPU (`Rgba32Float`, alpha 1 where covered),
     /// written when the encoder runs.
-    GpuImage(&'m wgpu::Texture),
-    /// A CPU method's per-vertex radiance.
+    GpuImage(wgpu::Texture),
+    /// Per-vertex radiance computed by the stages' calls.
     Vertices(VertexRadiance),
-    /// A CPU method's image.
+    /// An image computed by the stages' calls.
     Image(Image),
 }
 
-/// The stages run for a frame, with the time each call took on the CPU:
-/// for a GPU method the recording only (its GPU work runs when the host
+/// A stage run for a frame and the time its call took on the CPU: for a
+/// recorded stage the recording only (its GPU work runs when the host
 /// submits the encoder).
-pub type StageTimes = Vec<(Stage, Duration)>;
+pub type StageTime = (Stage, Duration);
 
-/// Runs (CPU) or records into `encoder` (GPU) the stages `work` asks for:
-/// relight, update, then shade or render.
-pub fn drive<'m>(
-    method: &'m mut Built,
+/// Records into `encoder` (a GPU method, unless `blocking`) or calls (a CPU
+/// method, or any method when `blocking`) the stages `work` asks for:
+/// relight, update, then shade or render. Called, `render` of a per-vertex
+/// method follows a `shade` toward the camera's eye, as `harness run` scores
+/// it.
+pub fn drive(
+    method: &mut Built,
     encoder: &mut wgpu::CommandEncoder,
     work: &Work,
-) -> Result<(Output<'m>, StageTimes)> {
-    let mut times = StageTimes::new();
+    blocking: bool,
+) -> Result<(Output, Vec<StageTime>)> {
+    let mut times = Vec::new();
     let mut timed = |stage, call: &mut dyn FnMut() -> Result<()>| {
         let start = Instant::now();
         call()?;
         times.push((stage, start.elapsed()));
         Ok::<_, shadow_core::Error>(())
     };
-    match method {
-        Built::Gpu(m) => {
+    let output = match method {
+        Built::Gpu(m) if !blocking => {
             if let Some(environment) = work.relight {
                 timed(Stage::Relight, &mut || {
                     m.record_relight(environment, encoder)
@@ -88,36 +118,45 @@ pub fn drive<'m>(
                     m.record_update(frame, work.camera, encoder)
                 })?;
             }
-            let start = Instant::now();
-            let output = if work.per_pixel {
-                let texture = m.record_render(work.camera, encoder)?;
-                times.push((Stage::Render, start.elapsed()));
-                Output::GpuImage(texture)
+            let mut output = None;
+            if work.per_pixel {
+                timed(Stage::Render, &mut || {
+                    let texture = m.record_render(work.camera, encoder)?;
+                    output = Some(Output::GpuImage(texture.clone()));
+                    Ok(())
+                })?;
             } else {
-                let buffer = m.record_shade(work.camera.eye, encoder)?;
-                times.push((Stage::Shade, start.elapsed()));
-                Output::GpuVertices(buffer)
-            };
-            Ok((output, times))
+                timed(Stage::Shade, &mut || {
+                    let buffer = m.record_shade(work.camera.eye, encoder)?;
+                    output = Some(Output::GpuVertices(buffer.clone()));
+                    Ok(())
+                })?;
+            }
+            output
         }
-        Built::Cpu(m) => {
+        _ => {
+            let m = method.method_mut();
             if let Some(environment) = work.relight {
                 timed(Stage::Relight, &mut || m.relight(environment))?;
             }
             if let Some(frame) = work.update {
                 timed(Stage::Update, &mut || m.update(frame, work.camera))?;
             }
-            let start = Instant::now();
-            let output = if work.per_pixel {
-                let image = m.render(work.camera)?;
-                times.push((Stage::Render, start.elapsed()));
-                Output::Image(image)
-            } else {
-                let radiance = m.shade(work.camera.eye)?;
-                times.push((Stage::Shade, start.elapsed()));
-                Output::Vertices(radiance)
-            };
-            Ok((output, times))
+            let mut output = None;
+            if !work.per_pixel || !m.capabilities().per_pixel {
+                timed(Stage::Shade, &mut || {
+                    output = Some(Output::Vertices(m.shade(work.camera.eye)?));
+                    Ok(())
+                })?;
+            }
+            if work.per_pixel {
+                timed(Stage::Render, &mut || {
+                    output = Some(Output::Image(m.render(work.camera)?));
+                    Ok(())
+                })?;
+            }
+            output
         }
-    }
+    };
+    Ok((output.expect("every branch runs shade or render"), times))
 }

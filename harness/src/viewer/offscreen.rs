@@ -42,6 +42,12 @@ pub fn screenshot(setup: Setup, shot: &Shot) -> Result<()> {
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
     );
     let view = target.create_view(&Default::default());
+    // The exposure of the frame the picture shows, as `harness run
+    // --images-dir` takes its last frame's.
+    let shown = (shot.frames.max(1) - 1) as isize;
+    session.step(shown)?;
+    session.fix_exposure()?;
+    session.step(-shown)?;
     for index in 0..shot.frames.max(1) {
         if index > 0 {
             session.step(1)?;

@@ -1,24 +1,25 @@
 //! What the viewer shows and how it gets there: the scene and its current
 //! frame, the environment and its turn, the method, the camera, the
 //! exposure and the heat map; each frame it drives the method
-//! ([`super::host`]) and records the picture ([`super::draw`]).
+//! ([`super::host`]) where something changed, and records the picture
+//! ([`super::draw`]).
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use glam::{Mat3, Vec3};
+use glam::Mat3;
 use shadow_core::{
     Camera, Environment, Error, FrameGeometry, Image, ProfileValue, Result, Scene, Stage,
-    gpu::GpuContext,
+    gpu::GpuContext, raster::near_plane,
 };
 
 use super::{
     clock::Clock,
     draw::{Content, Renderer, Viewpoint},
-    host::{Output, Work, drive},
+    host::{Output, StageTime, Work, drive},
 };
 use crate::{
-    images::{Exposure, error_colour, pixel_errors},
+    images::{Exposure, error_colour, linear_from_srgb, pixel_errors},
     methods::{Built, MethodSpec, Methods, SharedGpu},
     reference::{Domain, ImageReference, ReferenceCache, ReferenceSettings, cache_key},
     score,
@@ -48,6 +49,29 @@ pub enum Heat {
     Error(f32),
 }
 
+/// Everything the picture over the background depends on but the
+/// exposure: while it stays the same, the last picture is drawn again.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PictureKey {
+    camera: Camera,
+    frame: usize,
+    turn: f32,
+    /// Counts the methods opened.
+    method: u64,
+    heat_map: bool,
+}
+
+/// The picture over the background, where it is on the GPU.
+enum Shown {
+    /// Per-vertex radiance, one `vec4<f32>` per vertex.
+    Vertices(wgpu::Buffer),
+    /// An image of radiance (`true`, drawn times the exposure) or of
+    /// colours (the heat map).
+    Pixels(wgpu::Texture, bool),
+    /// Nothing: the stages failed.
+    Nothing,
+}
+
 pub struct Session {
     scene: Scene,
     base_environment: Environment,
@@ -56,7 +80,12 @@ pub struct Session {
     turn: f32,
     methods: Methods,
     spec: MethodSpec,
-    method: Option<Built>,
+    method: Built,
+    /// Methods opened so far.
+    generation: u64,
+    /// The method's stages are called rather than recorded: it refused a
+    /// recording (a setting only its calls support).
+    blocking: bool,
     ctx: Arc<GpuContext>,
     renderer: Renderer,
     frame_index: usize,
@@ -64,20 +93,17 @@ pub struct Session {
     /// The camera as the user left it; its size follows the target's.
     pub camera: Camera,
     home: Camera,
-    /// The camera of the last update.
-    updated_camera: Option<Camera>,
-    /// The camera of the previous frame: the camera is at rest when equal.
-    previous_camera: Option<Camera>,
     /// Display exposure in EV on top of the base.
     pub exposure_ev: f32,
     base_exposure: Option<f32>,
     pub playing: bool,
     pub heat_map: bool,
-    heat: Option<Heat>,
+    heat: Heat,
     cache: ReferenceCache,
     reference_settings: ReferenceSettings,
     needs_relight: bool,
     needs_update: bool,
+    shown: Option<(PictureKey, Shown)>,
     pub clock: Clock,
     /// The last error a stage or a method name gave, shown until the next
     /// change.
@@ -104,36 +130,37 @@ impl Session {
         let mut renderer = Renderer::new(&ctx, format);
         renderer.set_environment(&ctx, &setup.environment);
         renderer.set_frame(&ctx, &frame);
-        let mut session = Session {
+        let mut clock = Clock::default();
+        let method = open(&spec, &ctx, &setup.scene, &mut clock)?;
+        Ok(Session {
             environment: setup.environment.clone(),
             base_environment: setup.environment,
             scene: setup.scene,
             turn: 0.0,
             methods: setup.methods,
             spec,
-            method: None,
+            method,
+            generation: 0,
+            blocking: false,
             ctx,
             renderer,
             frame_index: 0,
             frame,
             camera: home,
             home,
-            updated_camera: None,
-            previous_camera: None,
             exposure_ev: 0.0,
             base_exposure: None,
             playing: false,
             heat_map: false,
-            heat: None,
+            heat: Heat::NoReference,
             cache: setup.cache,
             reference_settings: setup.reference,
             needs_relight: true,
             needs_update: true,
-            clock: Clock::default(),
+            shown: None,
+            clock,
             error: None,
-        };
-        session.open_method()?;
-        Ok(session)
+        })
     }
 
     pub fn scene(&self) -> &Scene {
@@ -152,48 +179,30 @@ impl Session {
         self.turn
     }
 
+    /// The heat map's state, while it is on.
     pub fn heat(&self) -> Option<&Heat> {
-        self.heat.as_ref()
+        self.heat_map.then_some(&self.heat)
     }
 
     pub fn adapter(&self) -> String {
         self.ctx.adapter.to_string()
     }
 
-    /// Switches to the method `name` (any name the harness reads); on an
-    /// error the current method stays.
+    /// Switches to the method `name` (any name the harness reads), built
+    /// and prepared before the current one is let go: on an error the
+    /// current method stays.
     pub fn switch_method(&mut self, name: &str) -> Result<()> {
         let spec = self.methods.parse(name)?;
-        let previous = std::mem::replace(&mut self.spec, spec);
-        match self.open_method() {
-            Ok(()) => {
-                self.clock.clear();
-                self.error = None;
-                Ok(())
-            }
-            Err(e) => {
-                self.spec = previous;
-                self.open_method()?;
-                Err(e)
-            }
-        }
-    }
-
-    /// Builds and prepares the method of `spec` on the viewer's device.
-    fn open_method(&mut self) -> Result<()> {
-        self.method = None;
-        let mut built = self
-            .spec
-            .build_stages(&SharedGpu::with(Arc::clone(&self.ctx)))?;
-        let start = Instant::now();
-        built.method_mut().prepare(&self.scene)?;
-        let prepared = start.elapsed();
-        self.method = Some(built);
+        let mut clock = Clock::default();
+        let method = open(&spec, &self.ctx, &self.scene, &mut clock)?;
+        self.spec = spec;
+        self.method = method;
+        self.clock = clock;
+        self.generation += 1;
+        self.blocking = false;
         self.needs_relight = true;
         self.needs_update = true;
-        self.heat = None;
-        self.clock.clear();
-        self.clock.add("prepare (once)", prepared);
+        self.error = None;
         Ok(())
     }
 
@@ -212,10 +221,9 @@ impl Session {
         };
         self.renderer.set_environment(&self.ctx, &self.environment);
         self.needs_relight = true;
-        self.heat = None;
     }
 
-    /// Moves the animation by `frames` (wrapping).
+    /// Moves the animation by `frames` (wrapping): the update stage.
     pub fn step(&mut self, frames: isize) -> Result<()> {
         let count = self.scene.frames().len() as isize;
         let index = (self.frame_index as isize + frames).rem_euclid(count) as usize;
@@ -224,18 +232,13 @@ impl Session {
             self.frame_index = index;
             self.renderer.set_frame(&self.ctx, &self.frame);
             self.needs_update = true;
-            self.heat = None;
         }
         Ok(())
     }
 
     /// Back to the scene's own camera, at the current size.
     pub fn reset_camera(&mut self) {
-        self.camera = Camera {
-            width: self.camera.width,
-            height: self.camera.height,
-            ..self.home
-        };
+        self.camera = self.home_at_size();
     }
 
     /// The target's size changed.
@@ -249,109 +252,114 @@ impl Session {
         self.base_exposure.unwrap_or(1.0) * self.exposure_ev.exp2()
     }
 
-    /// Runs or records what this frame needs, then records the picture
-    /// into `target` (`camera.width × camera.height`, the renderer's
-    /// format). The GPU work is in `encoder`, for the caller to submit.
+    /// Records the picture into `target` (`camera.width × camera.height`,
+    /// the renderer's format): the environment, and over it the method's
+    /// result, run or recorded into `encoder` where the camera, the frame,
+    /// the lighting, the method or the heat map changed since the last
+    /// picture (else the last one again). The GPU work is in `encoder`,
+    /// for the caller to submit. A failing stage leaves the background
+    /// drawn and returns its error.
     pub fn draw(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         target: &wgpu::TextureView,
     ) -> Result<()> {
         let camera = self.camera;
-        let at_rest = self.previous_camera == Some(camera);
-        self.previous_camera = Some(camera);
-        if self.updated_camera.is_some_and(|c| c != camera) && at_rest {
-            self.needs_update = true;
-        }
-        let reference = if self.heat_map {
-            self.reference_for(&camera)
-        } else {
-            None
+        let key = PictureKey {
+            camera,
+            frame: self.frame_index,
+            turn: self.turn,
+            method: self.generation,
+            heat_map: self.heat_map,
         };
-        if self.base_exposure.is_none() {
-            self.base_exposure = Some(self.initial_exposure()?);
-        }
-        if self.heat_map {
-            self.heat = Some(Heat::NoReference);
+        let current = !self.needs_relight
+            && !self.needs_update
+            && self.shown.as_ref().is_some_and(|(k, _)| *k == key);
+        let mut result = Ok(());
+        if !current {
+            let computed = self
+                .base_exposure()
+                .and_then(|()| self.compute(encoder, &camera));
+            let shown = match computed {
+                Ok(shown) => shown,
+                Err(e) => {
+                    result = Err(e);
+                    Shown::Nothing
+                }
+            };
+            self.shown = Some((key, shown));
+            self.needs_relight = false;
+            self.needs_update = false;
         }
         let exposure = self.exposure();
+        let content = match self.shown.as_ref().map(|(_, s)| s) {
+            Some(Shown::Vertices(buffer)) => Content::Vertices(buffer),
+            Some(Shown::Pixels(texture, radiance)) => Content::Pixels {
+                texture,
+                scale: if *radiance { exposure } else { 1.0 },
+            },
+            Some(Shown::Nothing) | None => Content::Background,
+        };
         let viewpoint = Viewpoint {
             camera: &camera,
             near: near_plane(&camera, &self.frame),
             exposure,
         };
-        let per_pixel = self.method()?.capabilities().per_pixel;
+        self.renderer
+            .record(&self.ctx, encoder, target, &viewpoint, content);
+        result
+    }
+
+    /// Runs or records the stages this picture needs and returns it. With
+    /// the heat map on and a cached reference of the view, the stages are
+    /// the method's own calls and the image is the one `harness run`
+    /// scores.
+    fn compute(&mut self, encoder: &mut wgpu::CommandEncoder, camera: &Camera) -> Result<Shown> {
+        let reference = if self.heat_map {
+            self.reference_for(camera)
+        } else {
+            None
+        };
+        self.heat = Heat::NoReference;
         let work = Work {
             relight: self.needs_relight.then_some(&self.environment),
             update: self.needs_update.then_some(&self.frame),
-            camera: &camera,
-            per_pixel,
+            camera,
+            per_pixel: reference.is_some() || self.method.method().capabilities().per_pixel,
         };
+        let gpu = matches!(self.method, Built::Gpu(_));
+        let blocking = self.blocking || reference.is_some();
+        let (output, times) = match drive(&mut self.method, encoder, &work, blocking) {
+            // A setting only the method's calls support: call it from now on.
+            Err(Error::InvalidConfig { .. } | Error::Unsupported { .. }) if gpu && !blocking => {
+                self.blocking = true;
+                drive(&mut self.method, encoder, &work, true)?
+            }
+            other => other?,
+        };
+        self.record_times(&times, gpu && !self.blocking && reference.is_none());
         let ctx = Arc::clone(&self.ctx);
-        let method = self
-            .method
-            .as_mut()
-            .ok_or_else(|| Error::stage("viewer", "no method"))?;
-        if let Some(reference) = reference {
-            // What the report scores: the method's own blocking stages and
-            // its image of this camera, against the cached reference.
-            let (image, times) = scored_image(method, &work)?;
-            let stats = score::image(&image, &reference)?;
-            self.heat = Some(Heat::Error(stats.relative_l2));
-            let map = heat_image(&image, &reference.image);
-            let texture = self.renderer.upload_image(&ctx, &map);
-            let content = Content::Pixels {
-                texture: &texture,
-                scale: 1.0,
-            };
-            self.renderer
-                .record(&ctx, encoder, target, &viewpoint, content);
-            self.record_times(&times, false);
-        } else {
-            let recorded = matches!(method, Built::Gpu(_));
-            let (output, times) = drive(method, encoder, &work)?;
-            // GPU results are read where the method left them; CPU ones
-            // are uploaded (buffers and textures are handles: cloning one
-            // copies no data).
-            let (buffer, texture) = match output {
-                Output::GpuVertices(buffer) => (Some(buffer.clone()), None),
-                Output::GpuImage(texture) => (None, Some(texture.clone())),
-                Output::Vertices(radiance) => (
-                    Some(self.renderer.upload_vertices(&ctx, radiance.flat())),
-                    None,
-                ),
-                Output::Image(image) => (None, Some(self.renderer.upload_image(&ctx, &image))),
-            };
-            let content = match (&buffer, &texture) {
-                (Some(buffer), _) => Content::Vertices(buffer),
-                (_, Some(texture)) => Content::Pixels {
-                    texture,
-                    scale: exposure,
-                },
-                _ => unreachable!("every output is a buffer or a texture"),
-            };
-            self.renderer
-                .record(&ctx, encoder, target, &viewpoint, content);
-            self.record_times(&times, recorded);
-        }
-        self.needs_relight = false;
-        if self.needs_update {
-            self.needs_update = false;
-            self.updated_camera = Some(camera);
-        }
-        Ok(())
+        Ok(match output {
+            Output::GpuVertices(buffer) => Shown::Vertices(buffer),
+            Output::GpuImage(texture) => Shown::Pixels(texture, true),
+            Output::Vertices(radiance) => {
+                Shown::Vertices(self.renderer.upload_vertices(&ctx, radiance.flat()))
+            }
+            Output::Image(image) => match reference {
+                Some(reference) => {
+                    let stats = score::image(&image, &reference)?;
+                    self.heat = Heat::Error(stats.relative_l2);
+                    let map = heat_image(&image, &reference.image);
+                    Shown::Pixels(self.renderer.upload_image(&ctx, &map), false)
+                }
+                None => Shown::Pixels(self.renderer.upload_image(&ctx, &image), true),
+            },
+        })
     }
 
-    fn method(&self) -> Result<&dyn shadow_core::ShadowMethod> {
-        self.method
-            .as_ref()
-            .map(Built::method)
-            .ok_or_else(|| Error::stage("viewer", "no method"))
-    }
-
-    /// Adds the stages' times to the clock; a GPU method's recorded stages
-    /// are named as such (their GPU work is in the frame's "GPU work").
-    fn record_times(&mut self, times: &[(Stage, Duration)], recorded: bool) {
+    /// Adds the stages' times to the clock; recorded stages are named as
+    /// such (their GPU work is in the frame's "GPU work").
+    fn record_times(&mut self, times: &[StageTime], recorded: bool) {
         for (stage, time) in times {
             let name = if recorded {
                 format!("{stage} (recording)")
@@ -365,15 +373,13 @@ impl Session {
     /// The method's own profile of its last stages: the name and value of
     /// each entry, per stage.
     pub fn profile(&self) -> Vec<(Stage, String, ProfileValue)> {
-        self.method()
-            .map(|m| {
-                m.profile()
-                    .entries()
-                    .iter()
-                    .map(|e| (e.stage, e.name.to_string(), e.value))
-                    .collect()
-            })
-            .unwrap_or_default()
+        self.method
+            .method()
+            .profile()
+            .entries()
+            .iter()
+            .map(|e| (e.stage, e.name.to_string(), e.value))
+            .collect()
     }
 
     /// The cached image reference of this camera, frame and lighting.
@@ -389,36 +395,46 @@ impl Session {
         self.cache.cached_image(&key, (camera.width, camera.height))
     }
 
-    /// The exposure `harness run --images` shows the scene's images with
-    /// (from the reference of the scene's own camera at this size, if
-    /// cached); else one mapping the 99th percentile of the method's
-    /// per-vertex luminance to white.
-    fn initial_exposure(&mut self) -> Result<f32> {
-        if let Some(reference) = self.reference_for(&self.home_at_size()) {
-            return Ok(Exposure::of(&reference.image).0);
+    /// Fixes the base exposure now, from the current frame (else the first
+    /// picture fixes it from its frame).
+    pub fn fix_exposure(&mut self) -> Result<()> {
+        self.base_exposure()
+    }
+
+    /// Sets the base exposure once: the one `harness run --images-dir`
+    /// shows the scene's images with (from the cached reference of the
+    /// scene's own camera at this size), else one mapping the 99th
+    /// percentile of the method's evaluated per-vertex radiance to white.
+    fn base_exposure(&mut self) -> Result<()> {
+        if self.base_exposure.is_some() {
+            return Ok(());
         }
-        let camera = self.camera;
-        let method = self
-            .method
-            .as_mut()
-            .ok_or_else(|| Error::stage("viewer", "no method"))?
-            .method_mut();
-        method.relight(&self.environment)?;
-        method.update(&self.frame, &camera)?;
-        let radiance = method.shade(camera.eye)?;
-        self.needs_relight = false;
-        self.needs_update = false;
-        self.updated_camera = Some(camera);
-        let mut luminance: Vec<f32> = radiance
-            .flat()
-            .map(|r| r.dot(Vec3::new(0.2126, 0.7152, 0.0722)))
-            .collect();
-        luminance.sort_unstable_by(f32::total_cmp);
-        let p99 = luminance
-            .get(luminance.len() * 99 / 100)
-            .copied()
-            .unwrap_or(0.0);
-        Ok(if p99 > 0.0 { 1.0 / p99 } else { 1.0 })
+        let exposure = match self.reference_for(&self.home_at_size()) {
+            Some(reference) => Exposure::of(&reference.image),
+            None => {
+                let camera = self.camera;
+                let method = self.method.method_mut();
+                method.relight(&self.environment)?;
+                method.update(&self.frame, &camera)?;
+                let radiance = method.shade(camera.eye)?;
+                self.needs_relight = false;
+                self.needs_update = false;
+                let values: Vec<_> = radiance
+                    .flat()
+                    .zip(radiance.flat_evaluated())
+                    .filter_map(|(r, evaluated)| evaluated.then_some(r))
+                    .collect();
+                Exposure::of(&Image {
+                    width: values.len().max(1) as u32,
+                    height: 1,
+                    covered: vec![true; values.len()],
+                    pixels: values,
+                    std_error: None,
+                })
+            }
+        };
+        self.base_exposure = Some(exposure.0);
+        Ok(())
     }
 
     fn home_at_size(&self) -> Camera {
@@ -430,76 +446,33 @@ impl Session {
     }
 }
 
-/// Runs the stages `work` asks for through the method's blocking calls and
-/// returns its image of the camera (for a per-vertex method, its shading
-/// toward the eye interpolated, as `harness run` renders it).
-fn scored_image(method: &mut Built, work: &Work) -> Result<(Image, Vec<(Stage, Duration)>)> {
-    let method = method.method_mut();
-    let mut times = Vec::new();
+/// Builds and prepares the method of `spec` on `ctx`'s device, its prepare
+/// time on `clock`.
+fn open(
+    spec: &MethodSpec,
+    ctx: &Arc<GpuContext>,
+    scene: &Scene,
+    clock: &mut Clock,
+) -> Result<Built> {
+    let mut method = spec.build_stages(&SharedGpu::with(Arc::clone(ctx)))?;
     let start = Instant::now();
-    if let Some(environment) = work.relight {
-        method.relight(environment)?;
-        times.push((Stage::Relight, start.elapsed()));
-    }
-    if let Some(frame) = work.update {
-        let start = Instant::now();
-        method.update(frame, work.camera)?;
-        times.push((Stage::Update, start.elapsed()));
-    }
-    if !work.per_pixel {
-        let start = Instant::now();
-        method.shade(work.camera.eye)?;
-        times.push((Stage::Shade, start.elapsed()));
-    }
-    let start = Instant::now();
-    let image = method.render(work.camera)?;
-    times.push((Stage::Render, start.elapsed()));
-    Ok((image, times))
+    method.method_mut().prepare(scene)?;
+    clock.add("prepare (once)", start.elapsed());
+    Ok(method)
 }
 
 /// The heat map of `image` against `reference` as an image of linear
 /// colours (the sRGB target encodes them back to the heat map's colours),
 /// covered where the reference is.
 fn heat_image(image: &Image, reference: &Image) -> Image {
-    let errors = pixel_errors(image, reference);
-    let linear = |c: u8| {
-        let v = c as f32 / 255.0;
-        if v <= 0.04045 {
-            v / 12.92
-        } else {
-            ((v + 0.055) / 1.055).powf(2.4)
-        }
-    };
     Image {
         width: reference.width,
         height: reference.height,
-        pixels: errors
+        pixels: pixel_errors(image, reference)
             .iter()
-            .map(|e| Vec3::from_array(error_colour(*e).map(linear)))
+            .map(|e| glam::Vec3::from_array(error_colour(*e).map(linear_from_srgb)))
             .collect(),
         covered: reference.covered.clone(),
         std_error: None,
     }
-}
-
-/// The near plane of the perspective the picture is drawn with: 10⁻⁵ of
-/// the distance from the eye to the farthest corner of the frame's bounds,
-/// as the CPU rasterizer places it.
-fn near_plane(camera: &Camera, frame: &FrameGeometry) -> f32 {
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for p in frame.objects.iter().flat_map(|o| o.positions()) {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
-    }
-    let far = (0..8)
-        .map(|i| {
-            let corner = Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            );
-            (corner - camera.eye).length()
-        })
-        .fold(0.0f32, f32::max);
-    (far * 1e-5).max(f32::MIN_POSITIVE)
 }

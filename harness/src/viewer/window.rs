@@ -324,6 +324,13 @@ impl Open {
     fn frame(&mut self) -> Result<()> {
         self.redraw = false;
         let start = Instant::now();
+        // The panel first: what it changes is drawn in this frame.
+        let input = self.egui_state.take_egui_input(&self.window);
+        let mut output = self
+            .egui
+            .run_ui(input, |ui| self.panel.show(ui, &mut self.session));
+        self.egui_state
+            .handle_platform_output(&self.window, output.platform_output);
         if self.session.playing
             && let Err(e) = self.session.step(1)
         {
@@ -352,12 +359,6 @@ impl Open {
             self.session.error = Some(e.to_string());
         }
 
-        let input = self.egui_state.take_egui_input(&self.window);
-        let mut output = self
-            .egui
-            .run_ui(input, |ui| self.panel.show(ui, &mut self.session));
-        self.egui_state
-            .handle_platform_output(&self.window, output.platform_output);
         let screen = egui_wgpu::ScreenDescriptor {
             size_in_pixels: [self.config.width, self.config.height],
             pixels_per_point: output.pixels_per_point,

@@ -75,11 +75,20 @@ pub fn clip_from_world(camera: &Camera, near: f32) -> Mat4 {
         * camera.view()
 }
 
+/// The near plane the rasterizer clips `frame` at: 10⁻⁵ of the distance
+/// from the camera's eye to the farthest corner of the frame's bounds. A GPU
+/// renderer drawing the same images takes it too.
+pub fn near_plane(camera: &Camera, frame: &FrameGeometry) -> f32 {
+    let bounds = frame.bounds();
+    let farthest = (camera.eye - bounds.center()).abs() + bounds.extent() * 0.5;
+    (farthest.length() * 1e-5).max(f32::MIN_POSITIVE)
+}
+
 /// The visible surface at every pixel centre of `camera`'s image, row 0 at
 /// the top, `None` where no triangle is seen.
 ///
-/// The near plane sits at 10⁻⁵ of the distance from the eye to the farthest
-/// corner of the frame's bounds; surfaces closer to the eye are clipped.
+/// The near plane sits at [`near_plane`]; surfaces closer to the eye are
+/// clipped.
 /// Fails if the image is larger than [`MAX_IMAGE_SIZE`] in either direction.
 pub fn visible_surface(camera: &Camera, frame: &FrameGeometry) -> Result<Vec<Option<SurfaceHit>>> {
     let viewport = Viewport::new(camera, frame)?;
@@ -288,11 +297,8 @@ impl Viewport {
                 camera.width, camera.height
             )));
         }
-        let bounds = frame.bounds();
-        let farthest = (camera.eye - bounds.center()).abs() + bounds.extent() * 0.5;
-        let near = (farthest.length() * 1e-5).max(f32::MIN_POSITIVE);
         Ok(Viewport {
-            clip_from_world: clip_from_world(camera, near).as_dmat4(),
+            clip_from_world: clip_from_world(camera, near_plane(camera, frame)).as_dmat4(),
             width: f64::from(camera.width),
             height: f64::from(camera.height),
         })
