@@ -53,16 +53,19 @@ pub fn screenshot(setup: Setup, shot: &Shot) -> Result<()> {
             session.step(1)?;
         }
         let start = Instant::now();
-        ctx.capture("viewer frame", || {
+        let ran = ctx.capture("viewer frame", || {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            session.draw(&mut encoder, &view)?;
+            let ran = session.draw(&mut encoder, &view)?;
             let submitted = Instant::now();
             ctx.queue.submit([encoder.finish()]);
             ctx.wait()?;
-            session.clock.add("GPU work", submitted.elapsed());
-            Ok(())
+            if ran {
+                session.clock.add("GPU work", submitted.elapsed());
+            }
+            Ok(ran)
         })?;
-        session.clock.add("frame", start.elapsed());
+        let row = if ran { "frame" } else { "redraw" };
+        session.clock.add(row, start.elapsed());
     }
     let texels: Vec<[u8; 4]> = ctx.read_texture(&target)?;
     let rgb: Vec<u8> = texels.iter().flat_map(|t| [t[0], t[1], t[2]]).collect();

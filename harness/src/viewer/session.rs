@@ -257,13 +257,14 @@ impl Session {
     /// result, run or recorded into `encoder` where the camera, the frame,
     /// the lighting, the method or the heat map changed since the last
     /// picture (else the last one again). The GPU work is in `encoder`,
-    /// for the caller to submit. A failing stage leaves the background
-    /// drawn and returns its error.
+    /// for the caller to submit. Says whether the method ran (a frame to
+    /// time as the method's); a failing stage leaves the background drawn
+    /// and returns its error.
     pub fn draw(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         target: &wgpu::TextureView,
-    ) -> Result<()> {
+    ) -> Result<bool> {
         let camera = self.camera;
         let key = PictureKey {
             camera,
@@ -307,7 +308,7 @@ impl Session {
         };
         self.renderer
             .record(&self.ctx, encoder, target, &viewpoint, content);
-        result
+        result.map(|()| !current)
     }
 
     /// Runs or records the stages this picture needs and returns it. With
