@@ -63,7 +63,15 @@ impl RayTrace {
             .sampler
             .as_ref()
             .ok_or_else(|| Error::stage(&self.name, "shade before relight"))?;
-        Ok((scene, frame, Estimator { bvh, sampler }))
+        Ok((
+            scene,
+            frame,
+            Estimator {
+                bvh,
+                sampler,
+                unoccluded: None,
+            },
+        ))
     }
 }
 

@@ -24,9 +24,20 @@
 //! The environment is treated as piecewise constant per texel
 //! ([`shadow_core::Environment::texel_radiance`]), which is exactly the function the sampler
 //! draws from: the reference integrates the map as stored, with no filtering.
+//!
+//! With a control variate ([`Estimator::unoccluded`]), the integrand is split
+//! into its unoccluded diffuse part `g(ω) = L_env(ω) (ρ_d/π) max(0, n·ω)`,
+//! whose integral `(ρ_d/π) E(n)` is known ([`Unoccluded`]), and the rest: the
+//! estimate is `(ρ_d/π) E(n)` plus the same MIS estimate of `f V − g`, which
+//! is `−g` where a ray is blocked and the glossy part where it is free. Both
+//! parts are unbiased, so their sum is; at a vertex that sees most of the sky
+//! the variance is that of the blocked light alone (none at all for a
+//! Lambert surface with nothing in the way). The estimate's standard error
+//! still comes from independent replicates.
 
 use std::f32::consts::FRAC_1_PI;
 
+use super::Unoccluded;
 use glam::Vec3;
 use rand_core::Rng;
 use rand_pcg::Pcg32;
@@ -97,15 +108,42 @@ impl Accumulator {
 pub struct Estimator<'a> {
     pub bvh: &'a SceneBvh,
     pub sampler: &'a EnvironmentSampler,
+    /// The unoccluded diffuse integral of the same environment: with it the
+    /// estimator samples only what the scene takes away from it (the
+    /// control variate); without, plain MIS (the ray-tracing baseline).
+    pub unoccluded: Option<&'a Unoccluded>,
+}
+
+/// The diffuse albedo ρ_d of a material (the part the control variate knows).
+fn diffuse(material: &Brdf) -> Vec3 {
+    match *material {
+        Brdf::Lambert { albedo } => albedo,
+        Brdf::Phong { diffuse, .. } => diffuse,
+    }
 }
 
 impl Estimator<'_> {
+    /// The known part of `point`'s radiance: `(ρ_d/π) E(n)` under the
+    /// control variate, zero without one.
+    pub fn known(&self, point: &ShadingPoint) -> Vec3 {
+        self.unoccluded.map_or(Vec3::ZERO, |table| {
+            diffuse(&point.material) * FRAC_1_PI * table.irradiance(point.normal)
+        })
+    }
+
     /// One replicate of `size` MIS iterations at `point`, its digital shifts
-    /// drawn from `rng`; returns the replicate's mean and the number of shadow
+    /// drawn from `rng`, around the known part `known` ([`Estimator::known`]
+    /// of the point); returns the replicate's mean and the number of shadow
     /// rays traced (directions with zero integrand cast none). Shadow rays
     /// are [`SceneBvh::unoccluded_from`]'s; a point pressed on another
     /// surface ([`SceneBvh::pressed`]) receives nothing.
-    pub fn replicate(&self, point: &ShadingPoint, rng: &mut Pcg32, size: u32) -> (Vec3, u64) {
+    pub fn replicate(
+        &self,
+        point: &ShadingPoint,
+        known: Vec3,
+        rng: &mut Pcg32,
+        size: u32,
+    ) -> (Vec3, u64) {
         let n = point.normal;
         let tangents = TangentSpace::new(n);
         let cosine_shift = [rng.next_u32(), rng.next_u32()];
@@ -113,11 +151,31 @@ impl Estimator<'_> {
         if self.bvh.pressed(point.position, n, point.object) {
             return (Vec3::ZERO, 0);
         }
-        let free = |dir| {
-            self.bvh
-                .unoccluded_from(point.position, n, dir, f32::INFINITY)
+        // The unoccluded diffuse reflectance the known part stands for.
+        let known_brdf = if self.unoccluded.is_some() {
+            diffuse(&point.material) * FRAC_1_PI
+        } else {
+            Vec3::ZERO
         };
         let mut rays = 0u64;
+        // f V − g at a direction whose integrand f is non-zero (g ≤ f, so
+        // nowhere else): one shadow ray.
+        let mut value = |dir: Vec3, le: Vec3, cos: f32| {
+            let f = le * point.material.eval(n, dir, point.view) * cos;
+            if f == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            rays += 1;
+            let g = le * known_brdf * cos;
+            if self
+                .bvh
+                .unoccluded_from(point.position, n, dir, f32::INFINITY)
+            {
+                f - g
+            } else {
+                -g
+            }
+        };
         let mut sum = Vec3::ZERO;
         for i in 0..size {
             // Strategy 1: cosine-weighted hemisphere.
@@ -127,13 +185,7 @@ impl Estimator<'_> {
             if cos > 0.0 {
                 let (pdf_env, le) = self.sampler.pdf_and_radiance(w);
                 if le != Vec3::ZERO {
-                    let f = le * point.material.eval(n, w, point.view) * cos;
-                    if f != Vec3::ZERO {
-                        rays += 1;
-                        if free(w) {
-                            sum += f / (cos * FRAC_1_PI + pdf_env);
-                        }
-                    }
+                    sum += value(w, le, cos) / (cos * FRAC_1_PI + pdf_env);
                 }
             }
 
@@ -141,16 +193,10 @@ impl Estimator<'_> {
             let s = self.sampler.sample(sobol2(i, env_shift));
             let cos = n.dot(s.dir);
             if cos > 0.0 && s.radiance != Vec3::ZERO {
-                let f = s.radiance * point.material.eval(n, s.dir, point.view) * cos;
-                if f != Vec3::ZERO {
-                    rays += 1;
-                    if free(s.dir) {
-                        sum += f / (s.pdf + cos * FRAC_1_PI);
-                    }
-                }
+                sum += value(s.dir, s.radiance, cos) / (s.pdf + cos * FRAC_1_PI);
             }
         }
-        (sum / size.max(1) as f32, rays)
+        (known + sum / size.max(1) as f32, rays)
     }
 }
 

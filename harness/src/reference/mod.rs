@@ -7,6 +7,7 @@ mod cache;
 mod estimator;
 mod info;
 pub mod transfer;
+mod unoccluded;
 
 use std::time::Instant;
 
@@ -22,6 +23,7 @@ use shadow_core::{
 pub use cache::{Domain, ReferenceCache, cache_key};
 pub use estimator::{Accumulator, Estimator, ShadingPoint, stream};
 pub use info::{ImageReferenceInfo, ReferenceInfo};
+pub use unoccluded::Unoccluded;
 
 /// How long the estimator runs.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -74,7 +76,7 @@ impl ReferenceSettings {
     /// which replicates of 32 instead of 64 halve (16 made the bunny's
     /// 71 s).
     pub const PICTURE: ReferenceSettings = ReferenceSettings {
-        replicate_size: 32,
+        replicate_size: 128,
         target_noise: Some(0.03),
         ..ReferenceSettings::IMAGE
     };
@@ -151,20 +153,21 @@ pub fn estimate(
         points.len()
     ];
     let mut rays = 0u64;
+    let known: Vec<Vec3> = points.par_iter().map(|p| estimator.known(p)).collect();
     progress.set_length(budget.iter().map(|&b| b as u64 * size as u64).sum());
     loop {
         rays += acc
             .par_iter_mut()
-            .zip(points.par_iter())
+            .zip(points.par_iter().zip(&known))
             .zip(budget.par_iter())
             .enumerate()
             .filter(|(_, ((a, _), b))| **b > a.replicates)
-            .map(|(i, ((a, p), &b))| {
+            .map(|(i, ((a, (p, &known)), &b))| {
                 let mut rays = 0;
                 progress.inc((b - a.replicates) as u64 * size as u64);
                 while a.replicates < b {
                     let mut rng = stream(settings.seed, i, a.replicates);
-                    let (mean, r) = estimator.replicate(p, &mut rng, size);
+                    let (mean, r) = estimator.replicate(p, known, &mut rng, size);
                     a.add(mean);
                     rays += r;
                 }
@@ -317,6 +320,7 @@ pub struct VertexReference {
 pub struct Setup {
     pub bvh: SceneBvh,
     pub sampler: EnvironmentSampler,
+    pub unoccluded: Unoccluded,
 }
 
 impl Setup {
@@ -324,13 +328,16 @@ impl Setup {
         Ok(Setup {
             bvh: SceneBvh::build(frame)?,
             sampler: EnvironmentSampler::new(environment),
+            unoccluded: Unoccluded::new(environment),
         })
     }
 
+    /// The reference's estimator: MIS around the control variate.
     pub fn estimator(&self) -> Estimator<'_> {
         Estimator {
             bvh: &self.bvh,
             sampler: &self.sampler,
+            unoccluded: Some(&self.unoccluded),
         }
     }
 }

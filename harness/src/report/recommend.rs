@@ -9,6 +9,10 @@ use super::analyse::Domain;
 use super::{Report, ReportRun};
 use crate::chart::clearly_faster;
 
+/// Errors closer than this (in percent; 10⁻⁶ relative, the rounding of f32
+/// radiance summed over a scene) are the same error.
+pub const EQUAL_ERRORS_PERCENT: f64 = 1e-4;
+
 /// Error budgets: relative L2 error in percent.
 pub const ERROR_BUDGETS: [f64; 3] = [2.0, 5.0, 10.0];
 
@@ -157,14 +161,17 @@ impl Report {
             .filter_map(move |r| Some((r, domain.score(r)?)))
     }
 
-    /// The relative noise of `scene`'s reference in `domain`, in percent.
+    /// The relative noise of `scene`'s reference in `domain`, in percent,
+    /// and at least [`EQUAL_ERRORS_PERCENT`]: errors closer than that are
+    /// equal even against a reference that is exact (the furnace's, whose
+    /// control variate knows the whole answer).
     pub(super) fn noise_percent(&self, scene: &str, domain: Domain) -> f64 {
         let reference = self.references.iter().find(|r| r.scene == scene);
         let noise = match domain {
             Domain::Vertex => reference.map(|r| r.noise),
             Domain::Image => reference.and_then(|r| r.image.as_ref()).map(|i| i.noise),
         };
-        f64::from(noise.unwrap_or(0.0)) * 100.0
+        (f64::from(noise.unwrap_or(0.0)) * 100.0).max(EQUAL_ERRORS_PERCENT)
     }
 
     /// Every scene × domain × budget, in that order; a domain no run of the
