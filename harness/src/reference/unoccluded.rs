@@ -38,9 +38,9 @@ impl Unoccluded {
     pub fn new(environment: &Environment) -> Unoccluded {
         let (width, height) = (environment.width(), environment.height());
         let texels: Vec<DVec3> = environment.texels().iter().map(|t| t.as_dvec3()).collect();
+        let bands: Vec<Band> = (0..height).map(|row| Band::new(row, height)).collect();
         let mut prefix = Vec::with_capacity(height * (width + 1));
-        for row in 0..height {
-            let band = Band::new(row, height);
+        for (row, band) in bands.iter().enumerate() {
             let mut sum = [DVec3::ZERO; 3];
             prefix.push(sum);
             for col in 0..width {
@@ -56,7 +56,7 @@ impl Unoccluded {
             width,
             height,
             texels,
-            bands: (0..height).map(|row| Band::new(row, height)).collect(),
+            bands,
             prefix,
         }
     }

@@ -4,12 +4,11 @@
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use shadow_core::gpu::{GpuContext, INSTALL_HINT};
+use shadow_core::gpu::{GpuContext, INSTALL_HINT, device_limits};
 
 /// Opens the adapter that can present to `surface` (any, offscreen) and a
-/// device with the limits the methods need (as [`GpuContext::new`]: buffer
-/// and 2D texture sizes raised to the adapter's); GPU errors raised outside
-/// the methods' own captures are printed, not fatal.
+/// device with the limits the methods need ([`device_limits`]); GPU errors
+/// raised outside the methods' own captures are printed, not fatal.
 pub fn open(
     instance: &wgpu::Instance,
     surface: Option<&wgpu::Surface<'_>>,
@@ -22,17 +21,10 @@ pub fn open(
     };
     let adapter = pollster::block_on(instance.request_adapter(&options))
         .map_err(|e| anyhow::anyhow!("no GPU adapter for the viewer ({e}). {INSTALL_HINT}"))?;
-    let supported = adapter.limits();
-    let limits = wgpu::Limits {
-        max_buffer_size: supported.max_buffer_size,
-        max_storage_buffer_binding_size: supported.max_storage_buffer_binding_size,
-        max_texture_dimension_2d: supported.max_texture_dimension_2d,
-        ..wgpu::Limits::default().or_worse_values_from(&supported)
-    };
     let descriptor = wgpu::DeviceDescriptor {
         label: Some("viewer"),
         required_features: wgpu::Features::empty(),
-        required_limits: limits,
+        required_limits: device_limits(&adapter),
         ..Default::default()
     };
     let (device, queue) = pollster::block_on(adapter.request_device(&descriptor))

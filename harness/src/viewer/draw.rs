@@ -1,6 +1,6 @@
 //! The viewer's passes: the environment as the background, then a method's
 //! result over it: per-vertex radiance interpolated over the triangles, or a
-//! per-pixel image as large as the target. Everything is linear radiance
+//! per-pixel image as large as the picture. Everything is linear radiance
 //! times an exposure, written to an sRGB target (the encoding of
 //! `harness run --images`' PNGs).
 
@@ -33,7 +33,7 @@ pub enum Content<'a> {
     /// Per-vertex radiance: one `vec4<f32>` per vertex of the frame, the
     /// objects' vertices one after another (`STORAGE`).
     Vertices(&'a wgpu::Buffer),
-    /// A per-pixel image as large as the target (`Rgba32Float`, alpha 1
+    /// A per-pixel image as large as the picture (`Rgba32Float`, alpha 1
     /// where covered), scaled by `scale` (the exposure for radiance, 1 for
     /// colours already in display range).
     Pixels {

@@ -82,7 +82,7 @@ fn fs_mesh(in: Shaded) -> @location(0) vec4<f32> {
     return vec4<f32>(in.radiance * view.forward.w, 1.0);
 }
 
-// Per-pixel results: the method's image, as large as the target; alpha 0
+// Per-pixel results: the method's image, as large as the picture; alpha 0
 // where no surface covers the pixel lets the background show.
 @fragment
 fn fs_picture(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {

@@ -16,7 +16,7 @@ pub mod host;
 pub mod offscreen;
 mod orbit;
 mod panel;
-mod session;
+mod state;
 pub mod window;
 
-pub use session::{Heat, Setup};
+pub use state::{Heat, Setup};

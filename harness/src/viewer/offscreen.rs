@@ -8,7 +8,7 @@ use anyhow::Result;
 
 use super::{
     device,
-    session::{Heat, Session, Setup},
+    state::{Heat, Setup, ViewState},
 };
 use crate::io::write_png_atomic;
 
@@ -32,9 +32,9 @@ pub struct Shot<'a> {
 pub fn screenshot(setup: Setup, shot: &Shot) -> Result<()> {
     let instance = wgpu::Instance::new(shadow_core::gpu::instance_descriptor());
     let (_adapter, ctx) = device::open(&instance, None)?;
-    let mut session = Session::new(setup, ctx.clone(), FORMAT, shot.size)?;
-    session.heat_map = shot.heat_map;
-    session.exposure_ev = shot.exposure_ev;
+    let mut state = ViewState::new(setup, ctx.clone(), FORMAT, shot.size)?;
+    state.heat_map = shot.heat_map;
+    state.exposure_ev = shot.exposure_ev;
     let target = ctx.create_texture_2d(
         "viewer screenshot",
         shot.size,
@@ -45,49 +45,49 @@ pub fn screenshot(setup: Setup, shot: &Shot) -> Result<()> {
     // The exposure of the frame the picture shows, as `harness run
     // --images-dir` takes its last frame's.
     let shown = (shot.frames.max(1) - 1) as isize;
-    session.step(shown)?;
-    session.fix_exposure()?;
-    session.step(-shown)?;
+    state.step(shown)?;
+    state.fix_exposure()?;
+    state.step(-shown)?;
     for index in 0..shot.frames.max(1) {
         if index > 0 {
-            session.step(1)?;
+            state.step(1)?;
         }
         let start = Instant::now();
         let ran = ctx.capture("viewer frame", || {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            let ran = session.draw(&mut encoder, &view)?;
+            let ran = state.draw(&mut encoder, &view)?;
             let submitted = Instant::now();
             ctx.queue.submit([encoder.finish()]);
             ctx.wait()?;
             if ran {
-                session.clock.add("GPU work", submitted.elapsed());
+                state.clock.add("GPU work", submitted.elapsed());
             }
             Ok(ran)
         })?;
         let row = if ran { "frame" } else { "redraw" };
-        session.clock.add(row, start.elapsed());
+        state.clock.add(row, start.elapsed());
     }
     let texels: Vec<[u8; 4]> = ctx.read_texture(&target)?;
     let rgb: Vec<u8> = texels.iter().flat_map(|t| [t[0], t[1], t[2]]).collect();
     write_png_atomic(shot.out, &rgb, shot.size.0, shot.size.1)?;
     println!(
         "{} on {}, frame {} of {}, {}×{} ({}): wrote {}",
-        session.method_name(),
-        session.scene().name(),
-        session.frame_index(),
-        session.scene().frames().len(),
+        state.method_name(),
+        state.scene().name(),
+        state.frame_index(),
+        state.scene().frames().len(),
         shot.size.0,
         shot.size.1,
-        session.adapter(),
+        state.adapter(),
         shot.out.display()
     );
-    for s in session.clock.summaries() {
+    for s in state.clock.summaries() {
         println!(
             "  {:<16} {:>9.2} ms  ({:.2}–{:.2}, {} frames)",
             s.name, s.median_ms, s.min_ms, s.max_ms, s.samples
         );
     }
-    match session.heat() {
+    match state.heat() {
         Some(Heat::Error(e)) => println!(
             "  error against the cached image reference: {:.2}%",
             e * 100.0

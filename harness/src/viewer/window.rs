@@ -23,7 +23,7 @@ use winit::{
 
 use super::{
     device, orbit, panel,
-    session::{Session, Setup},
+    state::{Setup, ViewState},
 };
 
 /// The methods keys 1–5 switch to: each family's standard setting.
@@ -59,11 +59,11 @@ pub fn run(setup: Setup, size: (u32, u32), heat_map: bool, exposure_ev: f32) -> 
     if let Some(open) = &app.open {
         println!(
             "{} on {} ({}):",
-            open.session.method_name(),
-            open.session.scene().name(),
-            open.session.adapter()
+            open.state.method_name(),
+            open.state.scene().name(),
+            open.state.adapter()
         );
-        for s in open.session.clock.summaries() {
+        for s in open.state.clock.summaries() {
             println!(
                 "  {:<16} {:>9.2} ms  ({:.2}–{:.2}, last {} frames)",
                 s.name, s.median_ms, s.min_ms, s.max_ms, s.samples
@@ -89,7 +89,7 @@ impl ApplicationHandler for App {
         };
         match Open::new(event_loop, setup, self.size) {
             Ok(mut open) => {
-                (open.session.heat_map, open.session.exposure_ev) = self.start;
+                (open.state.heat_map, open.state.exposure_ev) = self.start;
                 self.open = Some(open);
             }
             Err(e) => {
@@ -111,7 +111,7 @@ impl ApplicationHandler for App {
 
     fn about_to_wait(&mut self, _: &ActiveEventLoop) {
         if let Some(open) = &self.open
-            && (open.session.playing || open.redraw)
+            && (open.state.playing || open.redraw)
         {
             open.window.request_redraw();
         }
@@ -131,7 +131,7 @@ struct Open {
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     ctx: Arc<GpuContext>,
-    session: Session,
+    state: ViewState,
     egui: egui::Context,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
@@ -173,7 +173,7 @@ impl Open {
             view_formats: vec![],
         };
         surface.configure(&ctx.device, &config);
-        let session = Session::new(
+        let state = ViewState::new(
             setup,
             Arc::clone(&ctx),
             format,
@@ -189,13 +189,13 @@ impl Open {
             Some(ctx.device.limits().max_texture_dimension_2d as usize),
         );
         let egui_renderer = egui_wgpu::Renderer::new(&ctx.device, format, Default::default());
-        let panel = panel::Panel::new(session.method_name());
+        let panel = panel::Panel::new(state.method_name());
         Ok(Open {
             window,
             surface,
             config,
             ctx,
-            session,
+            state,
             egui,
             egui_state,
             egui_renderer,
@@ -216,7 +216,7 @@ impl Open {
                 self.config.width = size.width.max(1);
                 self.config.height = size.height.max(1);
                 self.surface.configure(&self.ctx.device, &self.config);
-                self.session.resize((self.config.width, self.config.height));
+                self.state.resize((self.config.width, self.config.height));
                 self.redraw = true;
             }
             WindowEvent::RedrawRequested => self.frame()?,
@@ -237,7 +237,7 @@ impl Open {
                 if let Some(last) = self.drag.last {
                     let height = self.config.height as f32;
                     let (dx, dy) = ((position.x - last.x) as f32, (position.y - last.y) as f32);
-                    let camera = &mut self.session.camera;
+                    let camera = &mut self.state.camera;
                     if self.drag.orbit {
                         *camera = orbit::orbit(camera, -dx * 0.01, dy * 0.01);
                         self.redraw = true;
@@ -253,7 +253,7 @@ impl Open {
                     MouseScrollDelta::LineDelta(_, y) => y,
                     MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
                 };
-                self.session.camera = orbit::zoom(&self.session.camera, 0.9f32.powf(lines));
+                self.state.camera = orbit::zoom(&self.state.camera, 0.9f32.powf(lines));
                 self.redraw = true;
             }
             _ => {}
@@ -262,23 +262,23 @@ impl Open {
     }
 
     fn key(&mut self, event_loop: &ActiveEventLoop, key: &Key) {
-        let session = &mut self.session;
+        let state = &mut self.state;
         let outcome = match key.as_ref() {
             Key::Character(c) => match c {
                 "1" | "2" | "3" | "4" | "5" => {
                     let index = c.parse::<usize>().unwrap_or(1) - 1;
-                    let switched = session.switch_method(KEYED_METHODS[index]);
-                    self.panel.name = session.method_name().to_string();
+                    let switched = state.switch_method(KEYED_METHODS[index]);
+                    self.panel.name = state.method_name().to_string();
                     switched
                 }
-                "." => session.step(1),
-                "," => session.step(-1),
+                "." => state.step(1),
+                "," => state.step(-1),
                 "h" | "H" => {
-                    session.heat_map = !session.heat_map;
+                    state.heat_map = !state.heat_map;
                     Ok(())
                 }
                 "r" | "R" => {
-                    session.reset_camera();
+                    state.reset_camera();
                     Ok(())
                 }
                 "q" | "Q" => {
@@ -288,23 +288,23 @@ impl Open {
                 _ => Ok(()),
             },
             Key::Named(NamedKey::Space) => {
-                session.playing = !session.playing;
+                state.playing = !state.playing;
                 Ok(())
             }
             Key::Named(NamedKey::ArrowLeft) => {
-                session.set_turn(session.turn() - TURN_STEP);
+                state.set_turn(state.turn() - TURN_STEP);
                 Ok(())
             }
             Key::Named(NamedKey::ArrowRight) => {
-                session.set_turn(session.turn() + TURN_STEP);
+                state.set_turn(state.turn() + TURN_STEP);
                 Ok(())
             }
             Key::Named(NamedKey::ArrowUp) => {
-                session.exposure_ev += 0.5;
+                state.exposure_ev += 0.5;
                 Ok(())
             }
             Key::Named(NamedKey::ArrowDown) => {
-                session.exposure_ev -= 0.5;
+                state.exposure_ev -= 0.5;
                 Ok(())
             }
             Key::Named(NamedKey::Escape) => {
@@ -315,7 +315,7 @@ impl Open {
         };
         if let Err(e) = outcome {
             eprintln!("error: {e}");
-            session.error = Some(e.to_string());
+            state.error = Some(e.to_string());
         }
     }
 
@@ -328,13 +328,13 @@ impl Open {
         let input = self.egui_state.take_egui_input(&self.window);
         let mut output = self
             .egui
-            .run_ui(input, |ui| self.panel.show(ui, &mut self.session));
+            .run_ui(input, |ui| self.panel.show(ui, &mut self.state));
         self.egui_state
             .handle_platform_output(&self.window, output.platform_output);
-        if self.session.playing
-            && let Err(e) = self.session.step(1)
+        if self.state.playing
+            && let Err(e) = self.state.step(1)
         {
-            self.session.error = Some(e.to_string());
+            self.state.error = Some(e.to_string());
         }
         let texture = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t)
@@ -353,10 +353,10 @@ impl Open {
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         let drawn = self
             .ctx
-            .capture("viewer frame", || self.session.draw(&mut encoder, &view));
+            .capture("viewer frame", || self.state.draw(&mut encoder, &view));
         let ran = drawn.unwrap_or_else(|e| {
             eprintln!("error: {e}");
-            self.session.error = Some(e.to_string());
+            self.state.error = Some(e.to_string());
             false
         });
 
@@ -408,14 +408,14 @@ impl Open {
             .submit(extra.into_iter().chain([encoder.finish()]));
         self.ctx.wait()?;
         if ran {
-            self.session.clock.add("GPU work", submitted.elapsed());
+            self.state.clock.add("GPU work", submitted.elapsed());
         }
         self.window.pre_present_notify();
         self.ctx.queue.present(texture);
         // A frame that drew the last picture again (the panel, the exposure)
         // is not the method's.
         let row = if ran { "frame" } else { "redraw" };
-        self.session.clock.add(row, start.elapsed());
+        self.state.clock.add(row, start.elapsed());
         if output
             .viewport_output
             .get(&egui::ViewportId::ROOT)

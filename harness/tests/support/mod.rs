@@ -6,6 +6,8 @@
 
 #![allow(dead_code)] // each test binary uses part of this module
 
+pub mod wall;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

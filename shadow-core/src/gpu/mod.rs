@@ -66,6 +66,21 @@ pub fn instance_descriptor() -> wgpu::InstanceDescriptor {
     descriptor
 }
 
+/// The limits [`GpuContext::new`] opens its device with, for a host that
+/// opens its own device for the methods: WebGPU's defaults (or the
+/// adapter's, where lower) with the buffer and 2D texture sizes raised to
+/// what `adapter` supports (the methods keep one storage buffer per scene).
+pub fn device_limits(adapter: &wgpu::Adapter) -> wgpu::Limits {
+    let supported = adapter.limits();
+    wgpu::Limits {
+        max_buffer_size: supported.max_buffer_size,
+        max_storage_buffer_binding_size: supported.max_storage_buffer_binding_size,
+        max_texture_dimension_2d: supported.max_texture_dimension_2d,
+        // Downlevel adapters (GL) support less than WebGPU's defaults.
+        ..wgpu::Limits::default().or_worse_values_from(&supported)
+    }
+}
+
 /// What the harness reports about the adapter a run used (DESIGN.md, "Time":
 /// a software adapter such as lavapipe is named as such).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -189,18 +204,10 @@ impl GpuContext {
             ))
         })?;
         let summary = AdapterSummary::new(&adapter.get_info());
-        let supported = adapter.limits();
-        let limits = wgpu::Limits {
-            max_buffer_size: supported.max_buffer_size,
-            max_storage_buffer_binding_size: supported.max_storage_buffer_binding_size,
-            max_texture_dimension_2d: supported.max_texture_dimension_2d,
-            // Downlevel adapters (GL) support less than WebGPU's defaults.
-            ..wgpu::Limits::default().or_worse_values_from(&supported)
-        };
         let descriptor = wgpu::DeviceDescriptor {
             label: Some("shadow-core"),
             required_features: wgpu::Features::empty(),
-            required_limits: limits,
+            required_limits: device_limits(&adapter),
             ..Default::default()
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&descriptor))

@@ -72,7 +72,7 @@ enum Shown {
     Nothing,
 }
 
-pub struct Session {
+pub struct ViewState {
     scene: Scene,
     base_environment: Environment,
     environment: Environment,
@@ -110,8 +110,8 @@ pub struct Session {
     pub error: Option<String>,
 }
 
-impl Session {
-    /// The session on `ctx`'s device, drawing into targets of `format`,
+impl ViewState {
+    /// The state on `ctx`'s device, drawing into targets of `format`,
     /// `size` pixels; fails on a bad method name or a method that cannot
     /// take the scene.
     pub fn new(
@@ -119,7 +119,7 @@ impl Session {
         ctx: Arc<GpuContext>,
         format: wgpu::TextureFormat,
         size: (u32, u32),
-    ) -> Result<Session> {
+    ) -> Result<ViewState> {
         let spec = setup.methods.parse(&setup.method)?;
         let home = Camera {
             width: size.0.max(1),
@@ -132,7 +132,7 @@ impl Session {
         renderer.set_frame(&ctx, &frame);
         let mut clock = Clock::default();
         let method = open(&spec, &ctx, &setup.scene, &mut clock)?;
-        Ok(Session {
+        Ok(ViewState {
             environment: setup.environment.clone(),
             base_environment: setup.environment,
             scene: setup.scene,
