@@ -240,7 +240,10 @@ fn ambient_occlusion_of_a_users_wall_matches_lamberts_formula() {
     }
     assert!(checked > 40);
 
-    // And the bake writes the same values into the file.
+    // And the bake, at its own default (a 1% bound over all vertices),
+    // writes values that agree with the formula to about that: measured
+    // 1.03% on these floor vertices, the scene's noisiest (beside the
+    // wall), allowed 2%.
     let output = dir.path().join("wall-ao.glb");
     harness(&[
         "bake",
@@ -248,14 +251,28 @@ fn ambient_occlusion_of_a_users_wall_matches_lamberts_formula() {
         input.to_str().unwrap(),
         "--out",
         output.to_str().unwrap(),
-        "--target",
-        "0.01",
     ])
     .unwrap();
     let baked = read_back(&output, "_AO");
     let floor_rows: Vec<_> = rows.iter().filter(|r| r["object"] == 0).collect();
+    let (mut error, mut signal) = (0.0f64, 0.0f64);
     for (v, row) in floor_rows.iter().enumerate() {
-        let value = row["radiance"][0].as_f64().unwrap() as f32;
-        approx::assert_relative_eq!(baked[0][v], value.clamp(0.0, 1.0), max_relative = 1e-6);
+        let p = Vec3::from_slice(
+            &row["position"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap() as f32)
+                .collect::<Vec<_>>(),
+        );
+        if let Some(expected) = support::wall::open_fraction(&wall, p) {
+            error += f64::from(baked[0][v] - expected).powi(2);
+            signal += f64::from(expected).powi(2);
+        }
     }
+    let relative = (error / signal).sqrt();
+    assert!(
+        relative < 0.02,
+        "baked floor against Lambert's formula: {relative}"
+    );
 }

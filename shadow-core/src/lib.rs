@@ -5,7 +5,7 @@
 //! row 0 at the top; every method returns the outgoing radiance of direct
 //! distant lighting with visibility from every object,
 //! `L_o(x, v) = ∫ L_env(ω) V(x, ω) f_r(ω, v) max(0, n·ω) dω`.
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 
 mod brdf;
 mod camera;

@@ -8,7 +8,14 @@
 //! importance sampling (p_e, [`EnvironmentSampler`]), and combines them with
 //! the balance heuristic (Veach 1997, §9.2): a sample ω of either strategy
 //! contributes f(ω) / (p_c(ω) + p_e(ω)). Both densities are non-zero wherever the
-//! integrand is, so the estimator is unbiased.
+//! integrand is, so the estimator is unbiased. Under a constant
+//! environment (the uniform sky of ambient occlusion) the cosine strategy
+//! alone would need half the rays, but every replicate of a Lambert surface
+//! is then the known part less a whole number of blocked rays over the
+//! replicate's size: the replicates of a vertex often tie and claim a zero
+//! standard error (4 × 128 per vertex claimed 0.8672 ± 0 beside a wall
+//! whose exact value is 0.8622), so both strategies stay, and the MIS
+//! weights keep every replicate's value continuous.
 //!
 //! Iterations come in *replicates*: randomized quasi-Monte Carlo (Owen 1997;
 //! L'Ecuyer and Lemieux 2002). A replicate of M iterations feeds each
@@ -124,19 +131,24 @@ fn diffuse(material: &Brdf) -> Vec3 {
 
 impl Estimator<'_> {
     /// The known part of `point`'s radiance: `(ρ_d/π) E(n)` under the
-    /// control variate, zero without one.
-    pub fn known(&self, point: &ShadingPoint) -> Vec3 {
-        self.unoccluded.map_or(Vec3::ZERO, |table| {
+    /// control variate, zero without one; `None` where the point lies
+    /// pressed on another surface ([`SceneBvh::pressed`]) and receives
+    /// nothing at all.
+    pub fn known(&self, point: &ShadingPoint) -> Option<Vec3> {
+        if self.bvh.pressed(point.position, point.normal, point.object) {
+            return None;
+        }
+        Some(self.unoccluded.map_or(Vec3::ZERO, |table| {
             diffuse(&point.material) * FRAC_1_PI * table.irradiance(point.normal)
-        })
+        }))
     }
 
-    /// One replicate of `size` MIS iterations at `point`, its digital shifts
+    /// One replicate of `size` iterations at `point`, its digital shifts
     /// drawn from `rng`, around the known part `known` ([`Estimator::known`]
-    /// of the point); returns the replicate's mean and the number of shadow
-    /// rays traced (directions with zero integrand cast none). Shadow rays
-    /// are [`SceneBvh::unoccluded_from`]'s; a point pressed on another
-    /// surface ([`SceneBvh::pressed`]) receives nothing.
+    /// of the point, which must not be pressed); returns the replicate's
+    /// mean and the number of shadow rays traced (directions with zero
+    /// integrand cast none). Shadow rays are
+    /// [`SceneBvh::unoccluded_from`]'s.
     pub fn replicate(
         &self,
         point: &ShadingPoint,
@@ -148,9 +160,6 @@ impl Estimator<'_> {
         let tangents = TangentSpace::new(n);
         let cosine_shift = [rng.next_u32(), rng.next_u32()];
         let env_shift = [rng.next_u32(), rng.next_u32()];
-        if self.bvh.pressed(point.position, n, point.object) {
-            return (Vec3::ZERO, 0);
-        }
         // The unoccluded diffuse reflectance the known part stands for.
         let known_brdf = if self.unoccluded.is_some() {
             diffuse(&point.material) * FRAC_1_PI

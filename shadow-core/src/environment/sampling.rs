@@ -29,6 +29,9 @@ const UNIFORM_FRACTION: f64 = 0.01;
 /// must stay below it.
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
+/// The density per steradian of the uniform distribution over the sphere.
+const UNIFORM_PDF: f32 = (1.0 / (4.0 * PI)) as f32;
+
 /// One direction drawn by [`EnvironmentSampler::sample`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EnvSample {
@@ -73,6 +76,11 @@ pub struct EnvironmentSampler {
     col_cdf: Vec<f64>,
     /// Guide tables of the conditional CDFs: W entries per row.
     col_guide: Vec<u32>,
+    /// The radiance of every texel, where all are equal: the distribution
+    /// is then uniform over the sphere, and sampling and densities need no
+    /// tables (the uniform sky of ambient occlusion, whose reference
+    /// traces most of a bake's rays).
+    constant: Option<Vec3>,
 }
 
 impl EnvironmentSampler {
@@ -147,7 +155,9 @@ impl EnvironmentSampler {
         let mut row_guide = vec![0u32; h];
         fill_guide(&row_cdf, &mut row_guide);
 
+        let first = env.texels[0];
         EnvironmentSampler {
+            constant: env.texels.iter().all(|t| *t == first).then_some(first),
             env: env.clone(),
             cos_edges,
             solid_angles,
@@ -161,8 +171,21 @@ impl EnvironmentSampler {
     /// Draws a direction from two uniform numbers in [0, 1): `u.x` picks the
     /// row and the latitude inside it, `u.y` the column and the longitude.
     /// Numbers outside [0, 1) (or NaN) are clamped into it.
+    /// A constant map is sampled uniformly over the sphere straight from
+    /// `u` (cos θ = 1 − 2 u.x, φ = 2π u.y), the same distribution.
     #[inline]
     pub fn sample(&self, u: Vec2) -> EnvSample {
+        if let Some(radiance) = self.constant {
+            let u = u.clamp(Vec2::ZERO, Vec2::ONE);
+            let cos_theta = 1.0 - 2.0 * u.x;
+            let sin_theta = ((1.0 - cos_theta) * (1.0 + cos_theta)).max(0.0).sqrt();
+            let (sin_phi, cos_phi) = (TAU as f32 * u.y).sin_cos();
+            return EnvSample {
+                dir: Vec3::new(sin_theta * cos_phi, cos_theta, sin_theta * sin_phi),
+                pdf: UNIFORM_PDF,
+                radiance,
+            };
+        }
         let (row, v) = pick(&self.row_cdf, &self.row_guide, u.x);
         let w = self.env.width;
         let (col, s) = pick(
@@ -190,6 +213,9 @@ impl EnvironmentSampler {
     /// the unit direction `dir`.
     #[inline]
     pub fn pdf(&self, dir: Vec3) -> f32 {
+        if self.constant.is_some() {
+            return UNIFORM_PDF;
+        }
         let (row, col) = self.env.texel_of(dir);
         self.density(row, col)
     }
@@ -199,6 +225,9 @@ impl EnvironmentSampler {
     /// map and weighs a sample from another strategy needs.
     #[inline]
     pub fn pdf_and_radiance(&self, dir: Vec3) -> (f32, Vec3) {
+        if let Some(radiance) = self.constant {
+            return (UNIFORM_PDF, radiance);
+        }
         let (row, col) = self.env.texel_of(dir);
         (self.density(row, col), self.env.texel(row, col))
     }
