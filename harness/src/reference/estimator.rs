@@ -33,14 +33,19 @@
 //! draws from: the reference integrates the map as stored, with no filtering.
 //!
 //! With a control variate ([`Estimator::unoccluded`]), the integrand is split
-//! into its unoccluded diffuse part `g(ω) = L_env(ω) (ρ_d/π) max(0, n·ω)`,
-//! whose integral `(ρ_d/π) E(n)` is known ([`Unoccluded`]), and the rest: the
-//! estimate is `(ρ_d/π) E(n)` plus the same MIS estimate of `f V − g`, which
-//! is `−g` where a ray is blocked and the glossy part where it is free. Both
-//! parts are unbiased, so their sum is; at a vertex that sees most of the sky
-//! the variance is that of the blocked light alone (none at all for a
-//! Lambert surface with nothing in the way). The estimate's standard error
-//! still comes from independent replicates.
+//! into an unoccluded diffuse part `g(ω) = L_env(ω) (ρ_d/π) max(0, m·ω)`,
+//! whose integral `(ρ_d/π) E(m)` is known ([`Unoccluded::control`]), and
+//! the rest: the estimate is `(ρ_d/π) E(m)` plus the same MIS estimate of
+//! `f V − g`. `m` is a normal a few degrees from the point's own `n` whose
+//! `E` is computed once and shared by every point near that normal; `g`
+//! then need not match `f` exactly, and the estimate is unbiased for any
+//! `m`: where `n·ω ≤ 0 < m·ω` the integrand is `−g` (no ray), and only
+//! the environment strategy draws there (its density is positive
+//! everywhere), weighted by it alone. Both parts are unbiased, so their
+//! sum is; at a vertex that sees most of the sky the variance is that of
+//! the blocked light and of the small `f − g` (none at all for a Lambert
+//! surface with nothing in the way under a constant sky, where `m = n`).
+//! The estimate's standard error still comes from independent replicates.
 
 use std::f32::consts::FRAC_1_PI;
 
@@ -129,18 +134,35 @@ fn diffuse(material: &Brdf) -> Vec3 {
     }
 }
 
+/// The known part of a point's radiance: `(ρ_d/π) E(m)` under the control
+/// variate (zero without one), and the normal `m` it is taken at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Known {
+    pub radiance: Vec3,
+    pub normal: Vec3,
+}
+
 impl Estimator<'_> {
-    /// The known part of `point`'s radiance: `(ρ_d/π) E(n)` under the
-    /// control variate, zero without one; `None` where the point lies
+    /// The known part of `point`'s radiance; `None` where the point lies
     /// pressed on another surface ([`SceneBvh::pressed`]) and receives
     /// nothing at all.
-    pub fn known(&self, point: &ShadingPoint) -> Option<Vec3> {
+    pub fn known(&self, point: &ShadingPoint) -> Option<Known> {
         if self.bvh.pressed(point.position, point.normal, point.object) {
             return None;
         }
-        Some(self.unoccluded.map_or(Vec3::ZERO, |table| {
-            diffuse(&point.material) * FRAC_1_PI * table.irradiance(point.normal)
-        }))
+        Some(match self.unoccluded {
+            Some(table) => {
+                let (normal, irradiance) = table.control(point.normal);
+                Known {
+                    radiance: diffuse(&point.material) * FRAC_1_PI * irradiance,
+                    normal,
+                }
+            }
+            None => Known {
+                radiance: Vec3::ZERO,
+                normal: point.normal,
+            },
+        })
     }
 
     /// One replicate of `size` iterations at `point`, its digital shifts
@@ -152,7 +174,7 @@ impl Estimator<'_> {
     pub fn replicate(
         &self,
         point: &ShadingPoint,
-        known: Vec3,
+        known: Known,
         rng: &mut Pcg32,
         size: u32,
     ) -> (Vec3, u64) {
@@ -167,15 +189,18 @@ impl Estimator<'_> {
             Vec3::ZERO
         };
         let mut rays = 0u64;
-        // f V − g at a direction whose integrand f is non-zero (g ≤ f, so
-        // nowhere else): one shadow ray.
+        // f V − g at a direction of radiance `le` and cosine `cos` to the
+        // normal: one shadow ray where f is non-zero.
         let mut value = |dir: Vec3, le: Vec3, cos: f32| {
+            let g = le * known_brdf * known.normal.dot(dir).max(0.0);
+            if cos <= 0.0 {
+                return -g;
+            }
             let f = le * point.material.eval(n, dir, point.view) * cos;
             if f == Vec3::ZERO {
-                return Vec3::ZERO;
+                return -g;
             }
             rays += 1;
-            let g = le * known_brdf * cos;
             if self
                 .bvh
                 .unoccluded_from(point.position, n, dir, f32::INFINITY)
@@ -198,14 +223,15 @@ impl Estimator<'_> {
                 }
             }
 
-            // Strategy 2: the environment's own distribution.
+            // Strategy 2: the environment's own distribution, the only one
+            // below the horizon of n (where g may still be non-zero).
             let s = self.sampler.sample(sobol2(i, env_shift));
             let cos = n.dot(s.dir);
-            if cos > 0.0 && s.radiance != Vec3::ZERO {
-                sum += value(s.dir, s.radiance, cos) / (s.pdf + cos * FRAC_1_PI);
+            if s.radiance != Vec3::ZERO {
+                sum += value(s.dir, s.radiance, cos) / (s.pdf + cos.max(0.0) * FRAC_1_PI);
             }
         }
-        (known + sum / size.max(1) as f32, rays)
+        (known.radiance + sum / size.max(1) as f32, rays)
     }
 }
 

@@ -21,7 +21,7 @@ use shadow_core::{
 };
 
 pub use cache::{Domain, ReferenceCache, cache_key};
-pub use estimator::{Accumulator, Estimator, ShadingPoint, stream};
+pub use estimator::{Accumulator, Estimator, Known, ShadingPoint, stream};
 pub use info::{ImageReferenceInfo, ReferenceInfo};
 pub use unoccluded::Unoccluded;
 
@@ -168,7 +168,7 @@ pub fn estimate(
         points.len()
     ];
     let mut rays = 0u64;
-    let known: Vec<Option<Vec3>> = points.par_iter().map(|p| estimator.known(p)).collect();
+    let known: Vec<Option<Known>> = points.par_iter().map(|p| estimator.known(p)).collect();
     progress.set_length(budget.iter().map(|&b| b as u64 * size as u64).sum());
     loop {
         rays += acc

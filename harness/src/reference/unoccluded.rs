@@ -16,16 +16,28 @@
 //! (below 10⁻⁵ of E on the shipped maps; see the tests). A constant map's
 //! `E(n)` is `π L` for every normal, taken as is.
 //!
-//! The cost is one `acos` per row edge and one `atan2` per quadrature node
+//! The control variate takes `E` at the centre of the normal's cell on an
+//! octahedral grid of normals ([`Unoccluded::control`]), computed once per
+//! cell and kept: any normal's exact `E` serves, so the estimate stays
+//! unbiased, and a picture's hundred thousand pixels need a few thousand
+//! integrals instead of one each.
+//!
+//! The cost of an integral is one `acos` per row edge and one `atan2` per quadrature node
 //! of a straddling cell: the sines and cosines of cell edges and of the
 //! nodes of whole cells are tabulated per column, those of the arc ends
 //! follow from the arc's `acos` by angle addition, and those of the nodes
 //! of clipped cells from their cell edge by a short Taylor series.
 
 use std::f64::consts::{PI, TAU};
+use std::sync::OnceLock;
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use shadow_core::Environment;
+
+/// Cells per side of the octahedral grid of normals whose `E` the control
+/// variate uses: 64 × 64 cells, a normal at most 3.7° from its cell's
+/// centre (see the tests).
+const NORMAL_GRID: usize = 64;
 
 /// Two-point Gauss–Legendre nodes on [−1, 1], each of weight 1.
 const GAUSS: [f64; 2] = [-0.577_350_269_189_625_8, 0.577_350_269_189_625_8];
@@ -48,6 +60,9 @@ pub struct Unoccluded {
     prefix: Vec<[DVec3; 3]>,
     /// `π L` where every texel holds the same `L`.
     constant: Option<Vec3>,
+    /// `E` at the centre of each cell of the octahedral grid of normals,
+    /// computed when first asked for.
+    grid: Vec<OnceLock<Vec3>>,
 }
 
 impl Unoccluded {
@@ -72,6 +87,9 @@ impl Unoccluded {
             nodes,
             prefix: Vec::with_capacity(height * (width + 1)),
             constant: None,
+            grid: (0..NORMAL_GRID * NORMAL_GRID)
+                .map(|_| OnceLock::new())
+                .collect(),
         };
         for row in 0..height {
             let mut sum = [DVec3::ZERO; 3];
@@ -101,6 +119,21 @@ impl Unoccluded {
             sin,
             cos,
         }
+    }
+
+    /// The control variate of a point of unit normal `n`: a unit normal
+    /// `m` near `n` and its exact `E(m)`. `m` is the centre of `n`'s cell
+    /// on a 64 × 64 octahedral grid, its `E` computed once; under a
+    /// constant map, `n` itself (`E` is the same for every normal).
+    pub fn control(&self, n: Vec3) -> (Vec3, Vec3) {
+        if let Some(e) = self.constant {
+            return (n, e);
+        }
+        let (cell, centre) = grid_cell(n);
+        (
+            centre,
+            *self.grid[cell].get_or_init(|| self.irradiance(centre)),
+        )
     }
 
     /// `E(n)` for a unit normal `n`: radiance times clamped cosine over the
@@ -200,6 +233,35 @@ impl Unoccluded {
             add(span(a, w), span(0, b - w))
         }
     }
+}
+
+/// The cell of the octahedral grid of normals that holds the unit vector
+/// `n` (Meyer et al. 2010's octahedral map, +Y up), and the unit normal
+/// at the cell's centre.
+fn grid_cell(n: Vec3) -> (usize, Vec3) {
+    let p = Vec2::new(n.x, n.z) / (n.x.abs() + n.y.abs() + n.z.abs());
+    let p = if n.y < 0.0 {
+        (Vec2::ONE - Vec2::new(p.y.abs(), p.x.abs())) * Vec2::new(sign(p.x), sign(p.y))
+    } else {
+        p
+    };
+    let side = NORMAL_GRID as f32;
+    let index = |x: f32| (((x + 1.0) * 0.5 * side) as usize).min(NORMAL_GRID - 1);
+    let (i, j) = (index(p.x), index(p.y));
+    let centre = |k: usize| (k as f32 + 0.5) / side * 2.0 - 1.0;
+    let q = Vec2::new(centre(i), centre(j));
+    let y = 1.0 - q.x.abs() - q.y.abs();
+    let q = if y < 0.0 {
+        (Vec2::ONE - Vec2::new(q.y.abs(), q.x.abs())) * Vec2::new(sign(q.x), sign(q.y))
+    } else {
+        q
+    };
+    (j * NORMAL_GRID + i, Vec3::new(q.x, y, q.y).normalize())
+}
+
+/// ±1, +1 at zero.
+fn sign(x: f32) -> f32 {
+    if x < 0.0 { -1.0 } else { 1.0 }
 }
 
 /// An angle with its sine and cosine.
@@ -486,6 +548,24 @@ mod tests {
             assert!(error < 1e-5, "n = {n}: {fast} against {slow} ({error:e})");
         }
         eprintln!("largest relative difference {largest:e}");
+    }
+
+    /// Every normal lies within a few degrees of its cell's centre, and the
+    /// centre lies in its own cell (measured over 20000 random normals:
+    /// 3.7° at most, at the folded corners of the octahedron; allowed 4.5°).
+    #[test]
+    fn normals_lie_near_their_cells_centre() {
+        let mut rng = Pcg32::new(5, 9);
+        let mut largest = 0.0f32;
+        for _ in 0..20000 {
+            let n = unit(&mut rng);
+            let (cell, centre) = grid_cell(n);
+            assert!(cell < NORMAL_GRID * NORMAL_GRID);
+            assert_eq!(grid_cell(centre).0, cell, "{n}: centre {centre}");
+            largest = largest.max(n.dot(centre).clamp(-1.0, 1.0).acos().to_degrees());
+        }
+        eprintln!("largest angle {largest}°");
+        assert!(largest < 4.5, "{largest}°");
     }
 
     /// Angle addition and the Taylor series of small turns give the sines
