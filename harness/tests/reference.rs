@@ -405,7 +405,7 @@ fn the_control_variate_at_a_nearby_normal_is_unbiased() {
     let se = est.std_error.as_ref().unwrap();
     let mut largest = 0.0f32;
     for ((p, x), s) in points.iter().zip(&est.mean).zip(se) {
-        let exact = 0.9 / std::f32::consts::PI * setup.unoccluded.irradiance(p.normal);
+        let exact = 0.9 / std::f32::consts::PI * setup.lighting.unoccluded.irradiance(p.normal);
         for c in 0..3 {
             assert!(s[c] > 0.0, "{}: no spread", p.normal);
             largest = largest.max((x[c] - exact[c]).abs() / s[c]);

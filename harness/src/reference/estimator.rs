@@ -189,10 +189,11 @@ impl Estimator<'_> {
             Vec3::ZERO
         };
         let mut rays = 0u64;
-        // f V − g at a direction of radiance `le` and cosine `cos` to the
-        // normal: one shadow ray where f is non-zero.
-        let mut value = |dir: Vec3, le: Vec3, cos: f32| {
-            let g = le * known_brdf * known.normal.dot(dir).max(0.0);
+        // f V − g at a direction of radiance `le` and cosines `cos` to the
+        // normal and `cos_m` to the control's: one shadow ray where f is
+        // non-zero.
+        let mut value = |dir: Vec3, le: Vec3, cos: f32, cos_m: f32| {
+            let g = le * known_brdf * cos_m.max(0.0);
             if cos <= 0.0 {
                 return -g;
             }
@@ -219,16 +220,17 @@ impl Estimator<'_> {
             if cos > 0.0 {
                 let (pdf_env, le) = self.sampler.pdf_and_radiance(w);
                 if le != Vec3::ZERO {
-                    sum += value(w, le, cos) / (cos * FRAC_1_PI + pdf_env);
+                    let cos_m = known.normal.dot(w);
+                    sum += value(w, le, cos, cos_m) / (cos * FRAC_1_PI + pdf_env);
                 }
             }
 
             // Strategy 2: the environment's own distribution, the only one
-            // below the horizon of n (where g may still be non-zero).
+            // below the horizon of n, where g may still be non-zero.
             let s = self.sampler.sample(sobol2(i, env_shift));
-            let cos = n.dot(s.dir);
-            if s.radiance != Vec3::ZERO {
-                sum += value(s.dir, s.radiance, cos) / (s.pdf + cos.max(0.0) * FRAC_1_PI);
+            let (cos, cos_m) = (n.dot(s.dir), known.normal.dot(s.dir));
+            if (cos > 0.0 || cos_m > 0.0) && s.radiance != Vec3::ZERO {
+                sum += value(s.dir, s.radiance, cos, cos_m) / (s.pdf + cos.max(0.0) * FRAC_1_PI);
             }
         }
         (known.radiance + sum / size.max(1) as f32, rays)

@@ -9,6 +9,7 @@ mod info;
 pub mod transfer;
 mod unoccluded;
 
+use std::cell::OnceCell;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -335,29 +336,48 @@ pub struct VertexReference {
     pub seconds: f64,
 }
 
+/// What the estimator reads of an environment: the same for every frame
+/// under it, so built once for all of a scene's frames.
+pub struct Lighting {
+    pub sampler: EnvironmentSampler,
+    pub unoccluded: Unoccluded,
+}
+
+impl Lighting {
+    pub fn new(environment: &Environment) -> Lighting {
+        Lighting {
+            sampler: EnvironmentSampler::new(environment),
+            unoccluded: Unoccluded::new(environment),
+        }
+    }
+
+    /// The reference's estimator over `bvh`: MIS around the control variate.
+    pub fn estimator<'a>(&'a self, bvh: &'a SceneBvh) -> Estimator<'a> {
+        Estimator {
+            bvh,
+            sampler: &self.sampler,
+            unoccluded: Some(&self.unoccluded),
+        }
+    }
+}
+
 /// Everything the estimator needs for one frame under one environment.
 pub struct Setup {
     pub bvh: SceneBvh,
-    pub sampler: EnvironmentSampler,
-    pub unoccluded: Unoccluded,
+    pub lighting: Lighting,
 }
 
 impl Setup {
     pub fn new(frame: &FrameGeometry, environment: &Environment) -> Result<Setup> {
         Ok(Setup {
             bvh: SceneBvh::build(frame)?,
-            sampler: EnvironmentSampler::new(environment),
-            unoccluded: Unoccluded::new(environment),
+            lighting: Lighting::new(environment),
         })
     }
 
     /// The reference's estimator: MIS around the control variate.
     pub fn estimator(&self) -> Estimator<'_> {
-        Estimator {
-            bvh: &self.bvh,
-            sampler: &self.sampler,
-            unoccluded: Some(&self.unoccluded),
-        }
+        self.lighting.estimator(&self.bvh)
     }
 }
 
@@ -370,6 +390,29 @@ pub fn vertex_reference(
     settings: &ReferenceSettings,
     progress: &ProgressBar,
 ) -> Result<VertexReference> {
+    let lighting = OnceCell::new();
+    vertex_reference_under(
+        scene,
+        frame,
+        environment,
+        &lighting,
+        eye,
+        settings,
+        progress,
+    )
+}
+
+/// [`vertex_reference`] with the environment's [`Lighting`] taken from
+/// `lighting`, built there if empty.
+fn vertex_reference_under(
+    scene: &Scene,
+    frame: &FrameGeometry,
+    environment: &Environment,
+    lighting: &OnceCell<Lighting>,
+    eye: Vec3,
+    settings: &ReferenceSettings,
+    progress: &ProgressBar,
+) -> Result<VertexReference> {
     if settings.min_replicates < 2 {
         return Err(Error::InvalidScene(format!(
             "a reference needs at least 2 replicates for its standard error, got {}",
@@ -377,9 +420,10 @@ pub fn vertex_reference(
         )));
     }
     let start = Instant::now();
-    let setup = Setup::new(frame, environment)?;
+    let bvh = SceneBvh::build(frame)?;
+    let lighting = lighting.get_or_init(|| Lighting::new(environment));
     let points = vertex_points(scene, frame, eye);
-    let est = estimate(&points, &setup.estimator(), settings, progress);
+    let est = estimate(&points, &lighting.estimator(&bvh), settings, progress);
     Ok(VertexReference {
         radiance: split_per_object(frame, &est),
         noise: est.relative_noise().unwrap_or(f32::INFINITY),
@@ -410,10 +454,40 @@ pub fn pixel_reference(
     settings: &ReferenceSettings,
     progress: &ProgressBar,
 ) -> Result<ImageReference> {
+    let lighting = OnceCell::new();
+    pixel_reference_under(
+        scene,
+        frame,
+        environment,
+        &lighting,
+        camera,
+        settings,
+        progress,
+    )
+}
+
+/// [`pixel_reference`] with the environment's [`Lighting`] taken from
+/// `lighting`, built there if empty.
+fn pixel_reference_under(
+    scene: &Scene,
+    frame: &FrameGeometry,
+    environment: &Environment,
+    lighting: &OnceCell<Lighting>,
+    camera: &Camera,
+    settings: &ReferenceSettings,
+    progress: &ProgressBar,
+) -> Result<ImageReference> {
     let start = Instant::now();
-    let setup = Setup::new(frame, environment)?;
-    let pixels = pixel_points(scene, frame, &setup.bvh, camera);
-    let mut reference = image_from_points(camera, &pixels, &setup.estimator(), settings, progress);
+    let bvh = SceneBvh::build(frame)?;
+    let lighting = lighting.get_or_init(|| Lighting::new(environment));
+    let pixels = pixel_points(scene, frame, &bvh, camera);
+    let mut reference = image_from_points(
+        camera,
+        &pixels,
+        &lighting.estimator(&bvh),
+        settings,
+        progress,
+    );
     reference.seconds = start.elapsed().as_secs_f64();
     Ok(reference)
 }
@@ -495,8 +569,19 @@ pub fn scene_references(
     progress: &ProgressBar,
 ) -> Result<(Vec<VertexReference>, bool)> {
     let eye = scene.camera().eye;
+    let lighting = OnceCell::new();
     per_frame(scene, |frame| {
-        let compute = || vertex_reference(scene, frame, environment, eye, settings, progress);
+        let compute = || {
+            vertex_reference_under(
+                scene,
+                frame,
+                environment,
+                &lighting,
+                eye,
+                settings,
+                progress,
+            )
+        };
         match cache {
             Some(cache) => {
                 let domain = Domain::Vertices { eye };
@@ -518,8 +603,20 @@ pub fn scene_image_references(
     cache: Option<&ReferenceCache>,
     progress: &ProgressBar,
 ) -> Result<(Vec<ImageReference>, bool)> {
+    let lighting = OnceCell::new();
     per_frame(scene, |frame| {
-        frame_image_reference(scene, frame, environment, camera, settings, cache, progress)
+        let compute = || {
+            pixel_reference_under(
+                scene,
+                frame,
+                environment,
+                &lighting,
+                camera,
+                settings,
+                progress,
+            )
+        };
+        cached_image(scene, frame, environment, camera, settings, cache, compute)
     })
 }
 
@@ -535,6 +632,20 @@ pub fn frame_image_reference(
     progress: &ProgressBar,
 ) -> Result<(ImageReference, bool)> {
     let compute = || pixel_reference(scene, frame, environment, camera, settings, progress);
+    cached_image(scene, frame, environment, camera, settings, cache, compute)
+}
+
+/// `compute`'s image reference of one frame, from `cache` where present
+/// (and stored there when computed); says whether it came from the cache.
+fn cached_image(
+    scene: &Scene,
+    frame: &FrameGeometry,
+    environment: &Environment,
+    camera: &Camera,
+    settings: &ReferenceSettings,
+    cache: Option<&ReferenceCache>,
+    compute: impl FnOnce() -> Result<ImageReference>,
+) -> Result<(ImageReference, bool)> {
     match cache {
         Some(cache) => {
             let domain = Domain::Pixels { camera };

@@ -240,28 +240,22 @@ impl Unoccluded {
 /// at the cell's centre.
 fn grid_cell(n: Vec3) -> (usize, Vec3) {
     let p = Vec2::new(n.x, n.z) / (n.x.abs() + n.y.abs() + n.z.abs());
-    let p = if n.y < 0.0 {
-        (Vec2::ONE - Vec2::new(p.y.abs(), p.x.abs())) * Vec2::new(sign(p.x), sign(p.y))
-    } else {
-        p
-    };
+    let p = if n.y < 0.0 { folded(p) } else { p };
     let side = NORMAL_GRID as f32;
     let index = |x: f32| (((x + 1.0) * 0.5 * side) as usize).min(NORMAL_GRID - 1);
     let (i, j) = (index(p.x), index(p.y));
     let centre = |k: usize| (k as f32 + 0.5) / side * 2.0 - 1.0;
     let q = Vec2::new(centre(i), centre(j));
     let y = 1.0 - q.x.abs() - q.y.abs();
-    let q = if y < 0.0 {
-        (Vec2::ONE - Vec2::new(q.y.abs(), q.x.abs())) * Vec2::new(sign(q.x), sign(q.y))
-    } else {
-        q
-    };
+    let q = if y < 0.0 { folded(q) } else { q };
     (j * NORMAL_GRID + i, Vec3::new(q.x, y, q.y).normalize())
 }
 
-/// ±1, +1 at zero.
-fn sign(x: f32) -> f32 {
-    if x < 0.0 { -1.0 } else { 1.0 }
+/// The octahedral map's fold of the lower hemisphere onto the square's
+/// corners, its own inverse.
+fn folded(p: Vec2) -> Vec2 {
+    let sign = |x: f32| if x < 0.0 { -1.0 } else { 1.0 };
+    (Vec2::ONE - Vec2::new(p.y.abs(), p.x.abs())) * Vec2::new(sign(p.x), sign(p.y))
 }
 
 /// An angle with its sine and cosine.
