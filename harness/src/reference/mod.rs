@@ -88,8 +88,8 @@ impl ReferenceSettings {
     /// round: four replicates of 128 left the default report's pictures at
     /// 0.2–1.3% noise. Smaller replicates claim too little: the bunny's
     /// 512-wide picture under `courtyard`, against a 0.54% reference, erred
-    /// by 2.50% with 2 × 64 (claimed 2.48%) but by 3.44% with 2 × 32
-    /// (claimed 2.36%).
+    /// by 2.47% with 2 × 64 (claimed 2.46%) but by 3.43% with 2 × 32
+    /// (claimed 2.34%).
     pub const PICTURE: ReferenceSettings = ReferenceSettings {
         replicate_size: 64,
         min_replicates: 2,
