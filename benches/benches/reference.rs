@@ -74,7 +74,7 @@ fn ambient_occlusion_rays(c: &mut Criterion) {
                 (0..per_point)
                     .filter(|&k| {
                         let d = tangents.to_world(cosine_hemisphere(sobol2(k, shift)));
-                        bvh.unoccluded_from(p.position, p.normal, d, f32::INFINITY)
+                        bvh.unoccluded_from(&p.surface(), d, f32::INFINITY)
                     })
                     .count() as u64
             })

@@ -27,7 +27,8 @@ use std::time::Instant;
 use glam::{Affine3A, Mat3, Vec3};
 use rayon::prelude::*;
 use shadow_core::{
-    Environment, FrameGeometry, Mesh, PosedObject, Result, ShTransfer, TangentSpace, TransferSpace,
+    Environment, FrameGeometry, Mesh, PosedObject, Result, ShTransfer, SurfacePoint, TangentSpace,
+    TransferSpace,
     bvh::SceneBvh,
     qmc::{cosine_hemisphere, sobol2},
     sh::{ShOrder, ShRgb, ShRotation, Window, Zonal, eval_basis, project_environment},
@@ -84,15 +85,18 @@ impl Transfer {
             .par_chunks_mut(n)
             .enumerate()
             .for_each(|(v, out)| {
-                let p = mesh.positions()[v];
-                let normal = mesh.normals()[v];
-                let tangents = TangentSpace::new(normal);
+                let at = SurfacePoint {
+                    position: mesh.positions()[v].as_dvec3(),
+                    normal: mesh.normals()[v],
+                    lift: mesh.lifts()[v],
+                };
+                let tangents = TangentSpace::new(at.normal);
                 let shift = vertex_shift(v as u32);
                 let mut basis = [0.0f32; 64];
                 for k in 0..rays {
                     let local = cosine_hemisphere(sobol2(k, shift));
                     let dir = tangents.to_world(local).normalize();
-                    if bvh.unoccluded_from(p, normal, dir, f32::INFINITY) {
+                    if bvh.unoccluded_from(&at, dir, f32::INFINITY) {
                         eval_basis(order, dir, &mut basis);
                         for (o, b) in out.iter_mut().zip(&basis) {
                             *o += b;

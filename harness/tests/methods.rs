@@ -4,7 +4,7 @@
 use shadow_core::shapes;
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use harness::{
     baselines::{RayTrace, Unshadowed},
     reference::{self, ReferenceSettings, Setup, ShadingPoint},
@@ -82,8 +82,9 @@ fn glossy_furnace_at_normal_view_reflects_diffuse_plus_specular() {
     let env = Environment::uniform(Vec3::ONE);
     let setup = Setup::new(&scene.frame_geometry(0).unwrap(), &env).unwrap();
     let point = ShadingPoint {
-        position: Vec3::ZERO,
+        position: DVec3::ZERO,
         normal: Vec3::Y,
+        lift: shadow_core::frame::LIFT,
         view: Vec3::Y,
         material,
         object: 0,

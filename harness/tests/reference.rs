@@ -5,7 +5,7 @@ mod support;
 use shadow_core::shapes;
 use std::sync::Arc;
 
-use glam::{Affine3A, Mat3, Vec3};
+use glam::{Affine3A, DVec3, Mat3, Vec3};
 use harness::{
     baselines::Unshadowed,
     reference::{self, ReferenceSettings, Setup, ShadingPoint},
@@ -143,8 +143,9 @@ fn centre_of_a_closed_box_is_black() {
     let frame = scene.frame_geometry(0).unwrap();
     let setup = Setup::new(&frame, &env).unwrap();
     let point = ShadingPoint {
-        position: Vec3::new(0.0, -1.0, 0.0),
+        position: DVec3::new(0.0, -1.0, 0.0),
         normal: Vec3::Y,
+        lift: shadow_core::frame::LIFT,
         view: Vec3::Y,
         material: white(0.8),
         object: 0,
@@ -380,8 +381,9 @@ fn the_control_variate_at_a_nearby_normal_is_unbiased() {
             let (theta, phi) = (0.13 + 0.121 * i as f32, 0.7 + 2.39 * i as f32);
             let normal = shadow_core::environment::direction_from_angles(theta, phi);
             ShadingPoint {
-                position: Vec3::ZERO,
+                position: DVec3::ZERO,
                 normal,
+                lift: shadow_core::frame::LIFT,
                 view: normal,
                 material: white(0.9),
                 object: 0,

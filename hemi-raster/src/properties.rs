@@ -155,10 +155,10 @@ proptest! {
         let raster = raster();
         let mut mask = Mask::EMPTY;
         for t in &tris {
-            raster.draw(*t, cull, &mut mask);
+            raster.draw(*t, cull, 0.0, &mut mask);
         }
         let before = mask;
-        raster.draw(extra, cull, &mut mask);
+        raster.draw(extra, cull, 0.0, &mut mask);
         prop_assert!(mask.contains(&before));
         prop_assert!(raster.grid().disk().contains(&mask));
     }

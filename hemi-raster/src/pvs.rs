@@ -96,7 +96,7 @@ impl VisibleSets {
     ) -> Result<VisibleSets> {
         let mut sets: Vec<Vec<Member>> = Vec::new();
         for frame in frames {
-            let blockers = Blockers::new(&frame?, cull);
+            let blockers = Blockers::new(&frame?, cull)?;
             sets.resize(blockers.vertex_count(), Vec::new());
             let coarse = hierarchy.map(|h| h.coarse_level(&blockers));
             let layout = Layout::new(&blockers, coarse.as_ref());
@@ -163,14 +163,16 @@ fn grow<W: MaskRow>(
     let local = |entry: Entry| layout.triangle(entry.slot()).map(|p| frame.to_local(p));
     for entry in candidates.entries() {
         let triangle = local(entry);
-        let planes = edge_planes(triangle, entry.cull());
+        let planes = edge_planes(triangle, entry.cull(), frame.contact());
         if entry.chords() && replaced(triangle, planes.above, planes.behind) {
             // Replaced in this frame: each fine triangle of its region is a
             // candidate of its own, kept under the near chord.
             let kept = member(set, entry).map(|i| &set[i].kept);
             for &fine in candidates.replacements(entry) {
                 let mut mask = Mask::EMPTY;
-                if raster.draw(local(fine), fine.cull(), &mut mask) && !mask.is_empty() {
+                if raster.draw(local(fine), fine.cull(), frame.contact(), &mut mask)
+                    && !mask.is_empty()
+                {
                     let known = kept.is_some_and(|k| k.contains(&fine));
                     shown.push(Shown {
                         known,
@@ -182,7 +184,7 @@ fn grow<W: MaskRow>(
             }
         } else if planes.kept {
             let mut mask = Mask::EMPTY;
-            raster.draw(triangle, entry.cull(), &mut mask);
+            raster.draw(triangle, entry.cull(), frame.contact(), &mut mask);
             let known = member(set, entry).is_some();
             shown.push(Shown {
                 known,

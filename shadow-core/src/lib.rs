@@ -35,7 +35,7 @@ pub use camera::Camera;
 pub use environment::{Environment, EnvironmentReport};
 pub use error::{Error, Result};
 pub use export::{DirectionalVisibility, Export, ShTransfer, TransferSpace};
-pub use frame::{TangentSpace, ray_origin};
+pub use frame::{SurfacePoint, TangentSpace, ray_origin};
 pub use mesh::{Aabb, Adjacency, Mesh, MeshReport};
 pub use method::{Capabilities, Capability, Image, ShadowMethod, VertexRadiance};
 pub use profile::{Profile, ProfileEntry, ProfileValue, Stage};

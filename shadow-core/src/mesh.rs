@@ -4,6 +4,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use crate::frame::vertex_lifts;
 use crate::{Error, Result};
 
 /// An axis-aligned bounding box.
@@ -50,24 +51,9 @@ impl Aabb {
         self.max - self.min
     }
 
-    /// Length of the diagonal: the scene scale that ray offsets are relative to.
+    /// Length of the diagonal.
     pub fn diagonal(&self) -> f32 {
         self.extent().length()
-    }
-
-    /// How far a point on a surface of a scene with these bounds is lifted
-    /// along its normal before it looks for blockers: 10⁻⁴ of the diagonal.
-    /// Large enough that a shadow ray never re-hits the triangles through
-    /// its own origin at f32 precision, small enough (0.1 mm on a 1 m scene)
-    /// not to leak light through contacts. Every method that looks from a
-    /// vertex (the Monte-Carlo reference, hemi-raster's receivers) lifts by
-    /// this, so that all see from the same point: at a concave crease the
-    /// faces that meet there do block part of the lifted point's hemisphere.
-    /// The reference's shadow rays also back up along the ray, so that a
-    /// surface through the point blocks too
-    /// ([`SceneBvh::unoccluded_from`](crate::bvh::SceneBvh::unoccluded_from)).
-    pub fn ray_offset(&self) -> f32 {
-        1e-4 * self.diagonal().max(f32::MIN_POSITIVE)
     }
 }
 
@@ -100,6 +86,9 @@ pub struct Mesh {
     normals: Vec<Vec3>,
     /// Shared between the poses of one mesh: topology never changes.
     triangles: Arc<[[u32; 3]]>,
+    /// Per vertex, how far its rays start off the surface
+    /// ([`vertex_lifts`](crate::frame::vertex_lifts)), of this pose.
+    lifts: Vec<f32>,
     report: MeshReport,
 }
 
@@ -132,6 +121,7 @@ impl Mesh {
                 positions[i]
             )));
         }
+        check_extent(&positions).map_err(bad)?;
         let n = positions.len();
         if let Some((t, tri)) = triangles
             .iter()
@@ -193,6 +183,7 @@ impl Mesh {
         }
         Ok(Mesh {
             name,
+            lifts: vertex_lifts(&positions, &triangles),
             positions,
             normals,
             triangles: triangles.into(),
@@ -225,6 +216,13 @@ impl Mesh {
     /// Unit normals, one per position.
     pub fn normals(&self) -> &[Vec3] {
         &self.normals
+    }
+
+    /// Per vertex, how far its rays start off the surface: [`LIFT`](crate::frame::LIFT)
+    /// times the longest edge of its triangles
+    /// ([`vertex_lifts`](crate::frame::vertex_lifts)).
+    pub fn lifts(&self) -> &[f32] {
+        &self.lifts
     }
 
     /// Counter-clockwise triangles, none degenerate.
@@ -310,6 +308,7 @@ impl Mesh {
         if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
             return Err(bad(format!("pose vertex {i} has a non-finite position")));
         }
+        check_extent(&positions).map_err(|what| bad(format!("pose: {what}")))?;
         let fallback = self.normals.iter().copied();
         let normals = match normals {
             Some(given) => given
@@ -325,6 +324,7 @@ impl Mesh {
         };
         Ok(Mesh {
             name: self.name.clone(),
+            lifts: vertex_lifts(&positions, &self.triangles),
             positions,
             normals,
             triangles: Arc::clone(&self.triangles),
@@ -333,8 +333,25 @@ impl Mesh {
     }
 }
 
+/// Fails when the points span more than f32 can subtract: every edge and
+/// every difference of positions must be finite.
+fn check_extent(positions: &[Vec3]) -> std::result::Result<(), String> {
+    let bounds = Aabb::from_points(positions.iter().copied());
+    if positions.is_empty() || bounds.extent().is_finite() {
+        Ok(())
+    } else {
+        Err(format!(
+            "positions span {:?} to {:?}, beyond what f32 can hold as a difference",
+            bounds.min, bounds.max
+        ))
+    }
+}
+
 /// True when the triangle repeats a vertex or its area is zero to within f32
 /// precision relative to its longest edge (a sliver of angle below ~1e-7 rad).
+/// Judged on the edges scaled by a power of two to their largest coordinate,
+/// so that the test depends on the triangle's shape alone, never on its
+/// size or units.
 fn is_degenerate(positions: &[Vec3], [a, b, c]: [u32; 3]) -> bool {
     if a == b || b == c || c == a {
         return true;
@@ -344,22 +361,28 @@ fn is_degenerate(positions: &[Vec3], [a, b, c]: [u32; 3]) -> bool {
         positions[b as usize],
         positions[c as usize],
     );
-    let cross = (pb - pa).cross(pc - pa).length();
-    let longest = (pb - pa)
+    let edges = [pb - pa, pc - pa];
+    let scale = crate::frame::unit_scale(&edges);
+    let [e1, e2] = edges.map(|e| e * scale);
+    let cross = e1.cross(e2).length();
+    let longest = e1
         .length_squared()
-        .max((pc - pb).length_squared())
-        .max((pa - pc).length_squared());
+        .max(e2.length_squared())
+        .max((e2 - e1).length_squared());
     cross <= f32::EPSILON * longest
 }
 
 /// Unnormalized per-vertex sums of face cross products (area-weighted normals).
+/// Summed with the positions scaled by a power of two to their largest
+/// coordinate (exact), so that no cross product overflows whatever the units.
 fn area_weighted_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+    let scale = crate::frame::unit_scale(positions);
     let mut normals = vec![Vec3::ZERO; positions.len()];
     for &[a, b, c] in triangles {
         let (pa, pb, pc) = (
-            positions[a as usize],
-            positions[b as usize],
-            positions[c as usize],
+            positions[a as usize] * scale,
+            positions[b as usize] * scale,
+            positions[c as usize] * scale,
         );
         let face = (pb - pa).cross(pc - pa);
         for i in [a, b, c] {

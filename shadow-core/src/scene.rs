@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use glam::{Affine3A, Vec3};
 
-use crate::{Aabb, Brdf, Camera, Error, Mesh, Result};
+use crate::{Aabb, Brdf, Camera, Error, Mesh, Result, SurfacePoint};
 
 /// One object: a mesh in its own model space, and its material.
 #[derive(Clone, Debug)]
@@ -213,16 +213,24 @@ impl FrameGeometry {
     /// Every vertex's world position and unit normal, the objects' vertices
     /// one after another: the flat order of per-vertex buffers.
     pub fn vertices(&self) -> impl Iterator<Item = (Vec3, Vec3)> + '_ {
-        self.object_vertices().map(|(_, p, n)| (p, n))
+        self.object_vertices()
+            .map(|(_, v)| (v.position.as_vec3(), v.normal))
     }
 
-    /// Every vertex as (object index, position, normal), objects in order.
-    pub fn object_vertices(&self) -> impl Iterator<Item = (u32, Vec3, Vec3)> + '_ {
+    /// Every vertex as (object index, the surface point it is), objects in
+    /// order.
+    pub fn object_vertices(&self) -> impl Iterator<Item = (u32, SurfacePoint)> + '_ {
         self.objects.iter().enumerate().flat_map(|(i, o)| {
-            o.positions()
-                .iter()
-                .zip(o.normals())
-                .map(move |(&p, &n)| (i as u32, p, n))
+            (o.positions().iter().zip(o.normals()).zip(o.lifts())).map(
+                move |((&position, &normal), &lift)| {
+                    let point = SurfacePoint {
+                        position: position.as_dvec3(),
+                        normal,
+                        lift,
+                    };
+                    (i as u32, point)
+                },
+            )
         })
     }
 }

@@ -1,6 +1,7 @@
 //! A triangle's centre and size: its centroid and the distance from it to
 //! the farthest corner, the sphere around it that culling and proximity
-//! tests compare against.
+//! tests compare against; and where a ray crosses it, for the few tests
+//! that trace single rays without a tree.
 //!
 //! Branch-free and always inlined, so that loops over many triangles
 //! evaluate them several lanes at a time.
@@ -31,9 +32,44 @@ pub fn bounding_sphere(corners: [Vec3; 3]) -> (Vec3, f32) {
     (centre, radius_squared(corners, centre).sqrt())
 }
 
+/// The distance t ≥ 0 along the ray from `origin` in direction `dir` at
+/// which it crosses triangle (a, b, c) from either side (Möller and
+/// Trumbore), or `None`. The edges are closed: a ray through an edge or a
+/// corner crosses.
+#[inline]
+pub fn ray_crossing(origin: Vec3, dir: Vec3, [a, b, c]: [Vec3; 3]) -> Option<f32> {
+    let (e1, e2) = (b - a, c - a);
+    let p = dir.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = origin - a;
+    let u = s.dot(p) * inv;
+    let q = s.cross(e1);
+    let v = dir.dot(q) * inv;
+    let t = e2.dot(q) * inv;
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t >= 0.0).then_some(t)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rays_cross_triangles_from_either_side() {
+        let t = [Vec3::ZERO, Vec3::X, Vec3::Z];
+        let above = Vec3::new(0.25, 2.0, 0.25);
+        assert_eq!(ray_crossing(above, Vec3::NEG_Y, t), Some(2.0));
+        assert_eq!(ray_crossing(-above, Vec3::Y, t), None);
+        let below = Vec3::new(0.25, -0.5, 0.25);
+        assert_eq!(ray_crossing(below, Vec3::Y, t), Some(0.5));
+        assert_eq!(ray_crossing(below, Vec3::NEG_Y, t), None);
+        // Beside it, and along its plane.
+        assert_eq!(ray_crossing(Vec3::new(0.9, 1.0, 0.9), Vec3::NEG_Y, t), None);
+        assert_eq!(ray_crossing(Vec3::new(-1.0, 0.0, 0.1), Vec3::X, t), None);
+    }
 
     #[test]
     fn centroid_and_radius_of_a_right_triangle() {

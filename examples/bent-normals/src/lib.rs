@@ -6,7 +6,7 @@ use harness::methods::{Build, Family, Read};
 use rayon::prelude::*;
 use shadow_core::{
     Camera, Capabilities, Environment, Error, FrameGeometry, Image, Result, Scene, ShadowMethod,
-    TangentSpace, VertexRadiance,
+    SurfacePoint, TangentSpace, VertexRadiance,
     bvh::SceneBvh,
     name::{MethodName, NameWriter},
     qmc,
@@ -116,15 +116,15 @@ impl ShadowMethod for BentNormals {
 
     fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         let bvh = SceneBvh::build(frame)?;
-        let vertices: Vec<(Vec3, Vec3, u32)> =
-            frame.object_vertices().map(|(o, p, n)| (p, n, o)).collect();
+        let vertices: Vec<(u32, SurfacePoint)> = frame.object_vertices().collect();
         let rays = self.rays;
         self.occlusion = vertices
             .par_iter()
             .enumerate()
-            .map(|(i, &(p, n, object))| {
+            .map(|(i, &(object, at))| {
+                let n = at.normal;
                 let tangent = TangentSpace::new(n);
-                if bvh.pressed(p, n, object) {
+                if bvh.pressed(&at, object) {
                     return (0.0, n);
                 }
                 // A Sobol' set per vertex, shifted by a hash of its index.
@@ -132,7 +132,7 @@ impl ShadowMethod for BentNormals {
                 let (mut open, mut bent) = (0_u32, Vec3::ZERO);
                 for k in 0..rays {
                     let dir = tangent.to_world(qmc::cosine_hemisphere(qmc::sobol2(k, shift)));
-                    if bvh.unoccluded_from(p, n, dir, f32::INFINITY) {
+                    if bvh.unoccluded_from(&at, dir, f32::INFINITY) {
                         open += 1;
                         bent += dir;
                     }

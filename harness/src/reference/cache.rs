@@ -12,7 +12,7 @@ use super::{ImageReference, ReferenceSettings, VertexReference, split};
 use crate::io::write_atomic;
 
 /// Bumped whenever the estimator or the file layout changes meaning.
-const FORMAT: &[u8; 8] = b"SSREF010";
+const FORMAT: &[u8; 8] = b"SSREF011";
 
 /// What a reference is of: the vertices seen from an eye, or the pixels of
 /// a camera's image.

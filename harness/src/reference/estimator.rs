@@ -50,11 +50,11 @@
 use std::f32::consts::FRAC_1_PI;
 
 use super::Unoccluded;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 use shadow_core::{
-    Brdf, TangentSpace,
+    Brdf, SurfacePoint, TangentSpace,
     bvh::SceneBvh,
     environment::EnvironmentSampler,
     qmc::{cosine_hemisphere, sobol2},
@@ -63,15 +63,31 @@ use shadow_core::{
 /// A point to shade: where, which way the surface faces, toward whom, with what.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadingPoint {
-    pub position: Vec3,
+    /// In f64, as [`SurfacePoint::position`].
+    pub position: DVec3,
     /// Unit shading normal.
     pub normal: Vec3,
+    /// How far its rays start off the surface
+    /// ([`SurfacePoint::lift`](shadow_core::SurfacePoint::lift)).
+    pub lift: f32,
     /// Unit direction from the point toward the viewer.
     pub view: Vec3,
     pub material: Brdf,
     /// The frame's object the point lies on (its own surfaces never press
     /// it: [`SceneBvh::pressed`]).
     pub object: u32,
+}
+
+impl ShadingPoint {
+    /// The surface point its rays leave from.
+    #[inline]
+    pub fn surface(&self) -> SurfacePoint {
+        SurfacePoint {
+            position: self.position,
+            normal: self.normal,
+            lift: self.lift,
+        }
+    }
 }
 
 /// Running sums of replicate means, per channel, in f64.
@@ -147,7 +163,7 @@ impl Estimator<'_> {
     /// pressed on another surface ([`SceneBvh::pressed`]) and receives
     /// nothing at all.
     pub fn known(&self, point: &ShadingPoint) -> Option<Known> {
-        if self.bvh.pressed(point.position, point.normal, point.object) {
+        if self.bvh.pressed(&point.surface(), point.object) {
             return None;
         }
         Some(match self.unoccluded {
@@ -179,6 +195,7 @@ impl Estimator<'_> {
         size: u32,
     ) -> (Vec3, u64) {
         let n = point.normal;
+        let surface = point.surface();
         let tangents = TangentSpace::new(n);
         let cosine_shift = [rng.next_u32(), rng.next_u32()];
         let env_shift = [rng.next_u32(), rng.next_u32()];
@@ -202,10 +219,7 @@ impl Estimator<'_> {
                 return -g;
             }
             rays += 1;
-            if self
-                .bvh
-                .unoccluded_from(point.position, n, dir, f32::INFINITY)
-            {
+            if self.bvh.unoccluded_from(&surface, dir, f32::INFINITY) {
                 f - g
             } else {
                 -g

@@ -271,13 +271,12 @@ pub fn vertex_points(scene: &Scene, frame: &FrameGeometry, eye: Vec3) -> Vec<Sha
         .zip(scene.objects())
         .enumerate()
         .flat_map(|(index, (posed, object))| {
-            posed
-                .positions()
-                .iter()
-                .zip(posed.normals())
-                .map(move |(&position, &normal)| ShadingPoint {
-                    position,
+            (posed.positions().iter().zip(posed.normals()))
+                .zip(posed.lifts())
+                .map(move |((&position, &normal), &lift)| ShadingPoint {
+                    position: position.as_dvec3(),
                     normal,
+                    lift,
                     view: (eye - position).normalize_or(normal),
                     material: object.material,
                     object: index as u32,
@@ -304,9 +303,14 @@ pub fn pixel_points(
             let object = &frame.objects[hit.object as usize];
             let tri = object.triangles()[hit.triangle as usize];
             let [a, b, c] = tri.map(|v| v as usize);
-            let (p, n) = (object.positions(), object.normals());
+            let (p, n, lifts) = (object.positions(), object.normals(), object.lifts());
             let bary = hit.barycentric;
-            let position = camera.eye + dir * hit.t;
+            // On the triangle, in f64 ([`SurfacePoint::position`]), from its
+            // first corner: weights that sum to 1 only in f32 would move a
+            // point far from the origin off the surface.
+            let (w, corner) = (bary.as_dvec3(), p[a].as_dvec3());
+            let position =
+                corner + (p[b].as_dvec3() - corner) * w.y + (p[c].as_dvec3() - corner) * w.z;
             let geometric = (p[b] - p[a]).cross(p[c] - p[a]);
             let mut normal =
                 (n[a] * bary.x + n[b] * bary.y + n[c] * bary.z).normalize_or(geometric.normalize());
@@ -316,6 +320,7 @@ pub fn pixel_points(
             Some(ShadingPoint {
                 position,
                 normal,
+                lift: lifts[a] * bary.x + lifts[b] * bary.y + lifts[c] * bary.z,
                 view: -dir,
                 material: scene.objects()[hit.object as usize].material,
                 object: hit.object,

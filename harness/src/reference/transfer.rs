@@ -25,12 +25,11 @@
 
 use std::{f64::consts::PI, time::Instant};
 
-use glam::Vec3;
 use indicatif::ProgressBar;
 use rand_core::Rng;
 use rayon::prelude::*;
 use shadow_core::{
-    Error, FrameGeometry, Result, Scene, TangentSpace,
+    Error, FrameGeometry, Result, Scene, SurfacePoint, TangentSpace,
     bvh::SceneBvh,
     sh::{ShOrder, eval_basis},
 };
@@ -165,8 +164,7 @@ pub fn transfer_reference(
     settings.validate()?;
     let start = Instant::now();
     let bvh = SceneBvh::build(frame)?;
-    let points: Vec<(Vec3, Vec3, u32)> =
-        frame.object_vertices().map(|(o, p, n)| (p, n, o)).collect();
+    let points: Vec<(u32, SurfacePoint)> = frame.object_vertices().collect();
     let n = settings.order.coeff_count();
     let mut mean = vec![0.0; points.len() * n];
     let mut std_error = vec![0.0; points.len() * n];
@@ -178,8 +176,8 @@ pub fn transfer_reference(
         .enumerate()
         .map_init(
             || Scratch::new(n),
-            |scratch, (v, ((mean, se), &(position, normal, object)))| {
-                let rays = vertex_transfer(&bvh, (position, normal, object), v, settings, scratch);
+            |scratch, (v, ((mean, se), &(object, at)))| {
+                let rays = vertex_transfer(&bvh, (object, at), v, settings, scratch);
                 let r = settings.replicates as f64;
                 for ((m, e), (&s, &s2)) in mean
                     .iter_mut()
@@ -210,16 +208,16 @@ pub fn transfer_reference(
 /// rays traced.
 fn vertex_transfer(
     bvh: &SceneBvh,
-    (position, normal, object): (Vec3, Vec3, u32),
+    (object, at): (u32, SurfacePoint),
     v: usize,
     settings: &TransferSettings,
     scratch: &mut Scratch,
 ) -> u64 {
-    let tangents = TangentSpace::new(normal);
+    let tangents = TangentSpace::new(at.normal);
     let weight = PI / settings.replicate_size as f64;
     scratch.sum.fill(0.0);
     scratch.sum_sq.fill(0.0);
-    if bvh.pressed(position, normal, object) {
+    if bvh.pressed(&at, object) {
         return 0;
     }
     for r in 0..settings.replicates {
@@ -229,7 +227,7 @@ fn vertex_transfer(
         for i in 0..settings.replicate_size {
             let local = cosine_hemisphere(sobol2(i, shift));
             let dir = tangents.to_world(local);
-            if bvh.unoccluded_from(position, normal, dir, f32::INFINITY) {
+            if bvh.unoccluded_from(&at, dir, f32::INFINITY) {
                 eval_basis(settings.order, dir, &mut scratch.basis);
                 for (acc, &y) in scratch.replicate.iter_mut().zip(&scratch.basis) {
                     *acc += y as f64;

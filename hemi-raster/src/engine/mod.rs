@@ -134,7 +134,7 @@ impl<W: MaskRow> Kernel for Receiver<'_, W> {
     #[inline(always)]
     fn run(self) -> Mask<W> {
         let m = self.frame.to_world();
-        let frame = Frame::new(self.frame.origin(), m);
+        let frame = Frame::new(self.frame.origin(), m, self.frame.contact());
         let resolution = self.lut.resolution() as u32;
         let columns = self.columns;
         let start = self.scratch.profile.is_some().then(Instant::now);

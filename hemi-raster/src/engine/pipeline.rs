@@ -12,6 +12,7 @@ use shadow_core::{Environment, Result};
 
 use super::simd::{Kernel, SimdToken};
 use super::{Columns, Scratch, UpdateProfile, receiver_mask};
+use crate::blockers::enclosure::Enclosure;
 use crate::blockers::{Blockers, Candidates, Layout};
 use crate::config::{Config, MaskResolution};
 use crate::hierarchy::TwoLevel;
@@ -96,7 +97,12 @@ impl<W: MaskRow> Pipeline<W> {
             (None, Some(h)) => h.candidates(&layout, v),
             (None, None) => Candidates::All(&layout),
         };
+        let enclosure = Enclosure::new(blockers);
+        let full = *self.raster.grid().disk();
         let mask = |scratch: &mut Scratch, v: usize| {
+            if enclosure.encloses(blockers, v) {
+                return full;
+            }
             let frame = blockers.frame(v);
             receiver_mask(simd, lut, &frame, &candidates(v), &columns, scratch)
         };
@@ -161,6 +167,7 @@ impl<W: MaskRow> Pipeline<W> {
         blocks: bool,
     ) -> Vec<Vec3> {
         let lobes = LobeGrid::new(self.raster.grid());
+        let eye = blockers.to_local(eye);
         vertices
             .into_par_iter()
             .map(|v| {

@@ -22,10 +22,13 @@ pub(super) struct Frame {
     /// |n| componentwise, and Σ|o|: the box test's reach and rounding scale.
     n_abs: Vec3,
     o_scale: f32,
+    /// The receiver's contact reach
+    /// ([`TangentFrame::contact`](crate::TangentFrame::contact)).
+    contact: f32,
 }
 
 impl Frame {
-    pub(super) fn new(o: Vec3, to_world: Mat3) -> Frame {
+    pub(super) fn new(o: Vec3, to_world: Mat3, contact: f32) -> Frame {
         let n = to_world.z_axis;
         Frame {
             o,
@@ -34,6 +37,7 @@ impl Frame {
             n,
             n_abs: n.abs(),
             o_scale: o.abs().element_sum(),
+            contact,
         }
     }
 
@@ -121,7 +125,7 @@ pub(super) fn setup<W: MaskRow>(
     let mut above = [false; LANES];
     let mut behind = [false; LANES];
     for l in 0..LANES {
-        let e = edge_planes(lane(&local, l), flags.cull[l]);
+        let e = edge_planes(lane(&local, l), flags.cull[l], frame.contact);
         for (k, m) in e.normals.iter().enumerate() {
             planes[3 * k][l] = m.x;
             planes[3 * k + 1][l] = m.y;
@@ -249,6 +253,7 @@ mod tests {
         let frame = Frame::new(
             Vec3::new(0.0, 1.0, 0.0),
             Mat3::from_cols(Vec3::X, Vec3::NEG_Z, Vec3::Y),
+            0.0,
         );
         assert!(frame.below(Vec3::ZERO, Vec3::new(5.0, 0.5, 5.0)));
         assert!(!frame.below(Vec3::ZERO, Vec3::new(5.0, 1.0, 5.0)));

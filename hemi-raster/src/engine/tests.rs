@@ -62,7 +62,12 @@ fn reference<W: MaskRow>(
 ) -> Mask<W> {
     let mut mask = Mask::EMPTY;
     for (t, cull) in triangles {
-        raster.draw(t.map(|p| frame.to_local(p)), cull, &mut mask);
+        raster.draw(
+            t.map(|p| frame.to_local(p)),
+            cull,
+            frame.contact(),
+            &mut mask,
+        );
     }
     mask
 }
@@ -71,7 +76,7 @@ fn every_path_matches_draw<W: MaskRow>(lut_resolution: usize) {
     let scene = scene();
     let geometry = scene.frame_geometry(0).unwrap();
     let cull = [true, false, true];
-    let blockers = Blockers::new(&geometry, &cull);
+    let blockers = Blockers::new(&geometry, &cull).unwrap();
     let raster = Rasterizer::<W>::new(lut_resolution).unwrap();
     let bases = Layout::slot_bases(blockers.objects.iter().map(|(r, _)| r.len()));
     let object_of = |t: usize| {
@@ -150,7 +155,7 @@ fn every_path_matches_draw<W: MaskRow>(lut_resolution: usize) {
                 if excluded.binary_search(&((slot + k) as u32)).is_ok() {
                     continue;
                 }
-                let planes = edge_planes(local(t), *cull);
+                let planes = edge_planes(local(t), *cull, frame.contact());
                 if o == own && replaced(local(t), planes.above, planes.behind) {
                     listed.extend(&regions[slot + k]);
                     swapped += 1;

@@ -177,7 +177,7 @@ impl HemiRaster {
             .as_mut()
             .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
         let start = Instant::now();
-        let blockers = Blockers::new(frame, &prepared.cull);
+        let blockers = Blockers::new(frame, &prepared.cull)?;
         let (hierarchy, visible) = (prepared.hierarchy.as_ref(), prepared.visible.as_ref());
         with_pipeline!(engine, p => p.rasterize(&blockers, hierarchy, visible, profile.as_deref_mut()));
         let visibility = start.elapsed();

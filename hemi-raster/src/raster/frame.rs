@@ -4,27 +4,44 @@
 use glam::{Mat3, Vec3};
 use shadow_core::TangentSpace;
 
-/// A receiver's tangent frame: origin at the vertex, z along its normal.
+/// A receiver's tangent frame: origin at the receiver, z along its normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TangentFrame {
     origin: Vec3,
     /// Columns: tangent, bitangent, normal (world space, orthonormal).
     to_world: Mat3,
+    /// How far the origin was lifted off its surface.
+    lift: f32,
 }
 
 impl TangentFrame {
-    /// The frame at `origin` with z along the unit `normal`; the tangents
-    /// are [`TangentSpace`]'s, those the Monte-Carlo reference draws its
-    /// directions in.
+    /// The frame at `origin` with z along the unit `normal`, not on any
+    /// surface (no contact reach); the tangents are [`TangentSpace`]'s,
+    /// those the Monte-Carlo reference draws its directions in.
     pub fn new(origin: Vec3, normal: Vec3) -> TangentFrame {
+        TangentFrame::lifted(origin, normal, 0.0)
+    }
+
+    /// The frame of a receiver lifted by `lift` off its surface along the
+    /// unit `normal`: its origin is `origin`, already lifted.
+    pub fn lifted(origin: Vec3, normal: Vec3, lift: f32) -> TangentFrame {
         TangentFrame {
             origin,
             to_world: TangentSpace::new(normal).matrix(),
+            lift,
         }
     }
 
     pub fn origin(&self) -> Vec3 {
         self.origin
+    }
+
+    /// How far behind the receiver a triangle's plane may pass and still
+    /// count as through it (the module docs of [`crate::raster`]): a
+    /// quarter of its lift, half the distance the reference backs its
+    /// shadow rays up by.
+    pub fn contact(&self) -> f32 {
+        0.25 * self.lift
     }
 
     pub fn normal(&self) -> Vec3 {

@@ -20,10 +20,10 @@
 mod lanes;
 mod wide;
 
-use glam::{Vec3, Vec3A};
+use glam::{DVec3, Vec3, Vec3A};
 use obvhs::triangle::Triangle;
 
-use crate::{Aabb, Error, FrameGeometry, Result};
+use crate::{Aabb, Error, FrameGeometry, Result, SurfacePoint};
 use lanes::Ray;
 use wide::{Visit, WideBvh};
 
@@ -81,6 +81,14 @@ impl Space {
         (Vec3A::from(p) - self.centre) * self.scale
     }
 
+    /// A world point given in f64, in the tree's space: rounded once, there.
+    #[inline]
+    fn precise(self, p: DVec3) -> Vec3A {
+        ((p - Vec3::from(self.centre).as_dvec3()) * f64::from(self.scale))
+            .as_vec3()
+            .into()
+    }
+
     /// The ray from world point `origin` along unit `dir`.
     #[inline]
     fn ray(self, origin: Vec3, dir: Vec3) -> Ray {
@@ -125,87 +133,94 @@ impl SceneBvh {
         self.bounds
     }
 
-    /// The offset that lifts shadow-ray origins off their surface
-    /// ([`Aabb::ray_offset`] of the frame's bounds).
-    pub fn ray_offset(&self) -> f32 {
-        self.bounds.ray_offset()
-    }
-
     /// True when the ray from `origin` in unit direction `dir` hits nothing with
-    /// t in [0, `t_max`]. `origin` is used as given: offset it first (see
-    /// [`SceneBvh::ray_offset`]).
+    /// t in [0, `t_max`]. `origin` is used as given: to look from a surface,
+    /// use [`SceneBvh::unoccluded_from`].
     #[inline]
     pub fn unoccluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        self.misses(origin, dir, t_max, |_, _, _| true)
+        self.misses(
+            self.space.point(origin),
+            dir,
+            t_max * self.space.scale,
+            |_, _, _| true,
+        )
+    }
+
+    /// The lift of a point at `position` whose own lift is `lift`
+    /// ([`Mesh::lifts`](crate::Mesh::lifts)): raised to the rounding of its
+    /// coordinates in the tree's space ([`crate::frame::lift_at`]), in BVH
+    /// units.
+    #[inline]
+    fn lift(&self, position: Vec3A, lift: f32) -> f32 {
+        crate::frame::lift_at(lift * self.space.scale, position.into())
     }
 
     /// True when nothing blocks the direction `dir` (unit) from the surface
-    /// point `position` with unit `normal`, within `t_max`: the shadow ray
-    /// of every estimator that looks from a vertex.
+    /// point `at` within `t_max`: the shadow ray of every estimator that
+    /// looks from a surface.
     ///
-    /// The ray starts at the point lifted along its normal by
-    /// [`SceneBvh::ray_offset`] (so that its own surface is behind it) and
-    /// backed up along the ray by half that (so that a surface through the
-    /// point, the floor under a box's edge, is in front of it: from the
-    /// lifted point alone, a ray from that edge downward meets the floor at
-    /// t = 0 and light leaks from under it). A hit nearer than the lift
-    /// counts only on a front face (counter-clockwise seen from the ray): at
-    /// a concave crease the backed-up origin lies behind the other face for
-    /// the rays that leave it, which must pass. A point pressed on another
-    /// surface ([`SceneBvh::pressed`]) is not handled here.
+    /// The ray starts at the point lifted along its normal by the lift ε (so
+    /// that its own surface is behind it) and backed up along the ray by
+    /// ε/2 (so that a surface through the point, the floor under a box's
+    /// edge, is in front of it: from the lifted point alone, a ray from that
+    /// edge downward meets the floor at t = 0 and light leaks from under
+    /// it). A hit nearer than ε counts only on a front face
+    /// (counter-clockwise seen from the ray): at a concave crease the
+    /// backed-up origin lies behind the other face for the rays that leave
+    /// it, which must pass. The origin is formed in the tree's space, where
+    /// the lift is not lost in the rounding of coordinates far from the
+    /// world's origin. A point pressed on another surface
+    /// ([`SceneBvh::pressed`]) is not handled here.
     #[inline]
-    pub fn unoccluded_from(&self, position: Vec3, normal: Vec3, dir: Vec3, t_max: f32) -> bool {
-        let offset = self.ray_offset();
-        let origin = position + normal * offset - dir * (0.5 * offset);
-        let near = offset * self.space.scale;
+    pub fn unoccluded_from(&self, at: &SurfacePoint, dir: Vec3, t_max: f32) -> bool {
+        let p = self.space.precise(at.position);
+        let near = self.lift(p, at.lift);
+        let origin = p + Vec3A::from(at.normal * near - dir * (0.5 * near));
         let along = Vec3A::from(dir);
-        self.misses(origin, dir, t_max + 0.5 * offset, |block, lane, t| {
+        let t_max = t_max * self.space.scale + 0.5 * near;
+        self.misses(origin, dir, t_max, |block, lane, t| {
             // e1 × e2 is the opposite of the counter-clockwise normal: it
             // points along the ray where the ray sees the face's front.
             t >= near || self.tree.reversed_normal(block, lane).dot(along) > 0.0
         })
     }
 
-    /// Whether the surface point `position` with unit `normal`, on object
-    /// `object` of the frame, lies pressed on another object's surface (a
-    /// box's bottom face on the floor, a ball's pole): then it receives no
-    /// light, though a shadow ray lifted along its normal would start behind
-    /// that surface and see the sky. Four probes, each a lift from the point
-    /// in the tangent plane (off the mesh's edges through it), look along
-    /// the normal from half a lift behind the point for another object's
-    /// surface within one and a half lifts, either side (surfaces are
-    /// two-sided); the point is pressed when all four find one (so that a
-    /// point on the rim of a pressed region, half of whose probes miss, is
-    /// not). The point's own object never presses it.
-    pub fn pressed(&self, position: Vec3, normal: Vec3, object: u32) -> bool {
-        let offset = self.ray_offset();
-        let tangents = crate::TangentSpace::new(normal);
-        // Directions that avoid the axes, so that no probe runs along a
-        // mesh's edge.
-        let jitter = [(0.83, 0.31), (-0.29, 0.87), (-0.81, -0.37), (0.33, -0.79)];
-        jitter.iter().all(|&(u, v)| {
-            let side = tangents.tangent * u + tangents.bitangent * v;
-            let probe = position + side * offset - normal * (0.5 * offset);
-            !self.misses(probe, normal, 1.5 * offset, |block, lane, _| {
-                self.ids[self.tree.primitive(block, lane) as usize].0 != object
+    /// Whether the surface point `at`, on object `object` of the frame,
+    /// lies pressed on another
+    /// object's surface (a box's bottom face on the floor, a ball's pole):
+    /// then it receives no light, though a shadow ray lifted along its
+    /// normal would start behind that surface and see the sky. The four
+    /// [`press_probes`](crate::frame::press_probes) look along the normal
+    /// for another object's surface, either side (surfaces are two-sided);
+    /// the point is pressed when all four find one (so that a point on the
+    /// rim of a pressed region, half of whose probes miss, is not). The
+    /// point's own object never presses it.
+    pub fn pressed(&self, at: &SurfacePoint, object: u32) -> bool {
+        let p = self.space.precise(at.position);
+        let lift = self.lift(p, at.lift);
+        let reach = crate::frame::PRESS_REACH * lift;
+        crate::frame::press_probes(p.into(), at.normal, lift)
+            .iter()
+            .all(|&probe| {
+                !self.misses(probe.into(), at.normal, reach, |block, lane, _| {
+                    self.ids[self.tree.primitive(block, lane) as usize].0 != object
+                })
             })
-        })
     }
 
     /// True when the ray from `origin` along unit `dir` meets no triangle
-    /// within `t_max` (world units) that `counts` (block, lane, distance in
-    /// BVH space) accepts.
+    /// within `t_max` that `counts` (block, lane, distance) accepts; origin
+    /// and distances in the tree's space.
     #[inline]
     fn misses(
         &self,
-        origin: Vec3,
+        origin: Vec3A,
         dir: Vec3,
         t_max: f32,
         counts: impl Fn(u32, usize, f32) -> bool,
     ) -> bool {
         let mut miss = true;
-        let ray = self.space.ray(origin, dir);
-        let t_max = t_max * self.space.scale;
+        let ray = Ray::new(origin, Vec3A::from(dir));
         self.tree.walk(&ray, t_max, |block, mut lanes, t| {
             while lanes != 0 {
                 let lane = lanes.trailing_zeros() as usize;
@@ -359,38 +374,45 @@ mod tests {
         });
         let scene = Scene::still("contact", objects.to_vec(), camera).unwrap();
         let bvh = SceneBvh::build(&scene.frame_geometry(0).unwrap()).unwrap();
-        let free = |p: Vec3, n: Vec3, d: Vec3| bvh.unoccluded_from(p, n, d.normalize(), 10.0);
+        // The box's vertices' lift (10⁻⁴ of its faces' diagonal).
+        let lift = 1e-4 * 0.78;
+        let at = |position: Vec3, normal: Vec3| SurfacePoint {
+            position: position.as_dvec3(),
+            normal,
+            lift,
+        };
+        let free = |p: Vec3, n: Vec3, d: Vec3| bvh.unoccluded_from(&at(p, n), d.normalize(), 10.0);
         // Where the box's −X side meets the floor: the floor blocks the lower
         // half of its hemisphere, the sky the upper.
         let edge = Vec3::new(-0.3, 0.0, 0.0);
         assert!(!free(edge, -Vec3::X, Vec3::new(-1.0, -0.3, 0.2)));
         assert!(free(edge, -Vec3::X, Vec3::new(-1.0, 0.3, 0.2)));
-        assert!(!bvh.pressed(edge, -Vec3::X, 1));
+        assert!(!bvh.pressed(&at(edge, -Vec3::X), 1));
         // The floor beside the box: the box blocks toward it, the sky the
         // rest, though the backed-up origin lies behind the box's side.
         let foot = Vec3::new(-0.3, 0.0, 0.1);
         assert!(!free(foot, Vec3::Y, Vec3::new(1.0, 0.4, 0.0)));
         assert!(free(foot, Vec3::Y, Vec3::new(-1.0, 0.4, 0.0)));
         assert!(free(foot, Vec3::Y, Vec3::new(-0.2, 1.0, 0.3)));
-        assert!(!bvh.pressed(foot, Vec3::Y, 0));
+        assert!(!bvh.pressed(&at(foot, Vec3::Y), 0));
         // The box's bottom face lies pressed on the floor, at its corners
         // too (two of them on the floor's diagonal); the floor under it is
         // pressed by it.
         for corner in [(-0.3, -0.3), (0.3, 0.3), (0.3, -0.3), (0.0, 0.1)] {
             let p = Vec3::new(corner.0, 0.0, corner.1);
-            assert!(bvh.pressed(p, -Vec3::Y, 1), "{p}");
+            assert!(bvh.pressed(&at(p, -Vec3::Y), 1), "{p}");
         }
-        assert!(bvh.pressed(Vec3::new(0.1, 0.0, 0.0), Vec3::Y, 0));
+        assert!(bvh.pressed(&at(Vec3::new(0.1, 0.0, 0.0), Vec3::Y), 0));
         // Away from contacts, as before.
         let open = Vec3::new(0.8, 0.0, 0.8);
-        assert!(!bvh.pressed(open, Vec3::Y, 0));
+        assert!(!bvh.pressed(&at(open, Vec3::Y), 0));
         assert!(free(open, Vec3::Y, Vec3::new(0.1, 1.0, 0.0)));
         assert!(!free(open, Vec3::Y, Vec3::new(-1.0, 0.5, -1.0)));
         let top = Vec3::new(0.3, 0.5, 0.0);
-        assert!(!bvh.pressed(top, Vec3::X, 1));
+        assert!(!bvh.pressed(&at(top, Vec3::X), 1));
         // A face is never pressed by its own object, from either side: the
         // box's side seen from inside it.
-        assert!(!bvh.pressed(Vec3::new(0.3, 0.25, 0.0), -Vec3::X, 1));
+        assert!(!bvh.pressed(&at(Vec3::new(0.3, 0.25, 0.0), -Vec3::X), 1));
         assert!(free(top, Vec3::X, Vec3::new(1.0, 0.5, 0.0)));
     }
 

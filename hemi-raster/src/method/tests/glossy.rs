@@ -142,7 +142,7 @@ fn brute_force_glossy<W: MaskRow>(
     radiance: &dyn Fn(Vec3) -> Vec3,
 ) -> Vec3 {
     let frame = blockers.frame(v);
-    let view = (eye - frame.origin()).normalize();
+    let view = (blockers.to_local(eye) - frame.origin()).normalize();
     let r = shadow_core::reflect(frame.to_world().transpose() * view, Vec3::Z);
     let (res, sub) = (W::RESOLUTION, 8);
     let step = 2.0 / (res * sub) as f32;

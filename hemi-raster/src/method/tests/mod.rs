@@ -10,6 +10,7 @@ use shadow_core::{Frame, Mesh, Object, Pose};
 use super::*;
 use crate::test_util::{grid, icosphere, projected_solid_angle};
 
+mod contacts;
 mod glossy;
 
 pub(super) fn lambert(rho: f32) -> Brdf {
