@@ -9,13 +9,16 @@ use shadow_core::{Camera, Environment, Scene, raster::MAX_IMAGE_SIZE};
 
 use crate::{
     reference::{ReferenceCache, ReferenceSettings},
-    scenes::{self, SCENES},
+    scenes::{
+        self, SCENES,
+        stress::{STRESS_SCENES, stress_scene},
+    },
 };
 
 /// A built-in scene or the user's glTF file.
 #[derive(Args, Debug)]
 pub struct Input {
-    /// A built-in scene (see `harness list`).
+    /// A built-in scene or a stress scene (see `harness list`).
     #[arg(long, conflicts_with = "mesh", required_unless_present = "mesh")]
     pub scene: Option<String>,
     /// Your own glTF/GLB file instead of a built-in scene (white Lambert material).
@@ -36,6 +39,14 @@ impl Input {
     /// The scene and its environment (the scene's own unless `--env`).
     pub fn load(&self) -> Result<(Scene, Environment)> {
         let (scene, default_env) = match (&self.scene, &self.mesh) {
+            (Some(name), _) if STRESS_SCENES.iter().any(|(s, _)| s == name) => {
+                let stress = stress_scene(name)?;
+                let env = match &self.env.env {
+                    None => self.env.adjust(stress.environment)?,
+                    Some(_) => self.env.load("uniform")?,
+                };
+                return Ok((stress.scene, env));
+            }
             (Some(name), _) => {
                 let spec = SCENES.iter().find(|s| s.name == name);
                 (
@@ -82,6 +93,11 @@ impl EnvArgs {
         let name = self.env.as_deref().unwrap_or(default);
         let env =
             scenes::environment(name).with_context(|| format!("loading environment {name}"))?;
+        self.adjust(env)
+    }
+
+    /// `env` turned and exposed as asked.
+    pub fn adjust(&self, env: Environment) -> Result<Environment> {
         Ok(scenes::adjusted(env, self.env_rotate, self.exposure)?)
     }
 }

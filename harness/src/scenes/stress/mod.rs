@@ -15,7 +15,7 @@ use std::{
 
 use glam::{Affine3A, Vec2, Vec3};
 use shadow_core::{
-    Environment, Frame, Mesh, Object, Pose, Result, Scene, environment::luminance, shapes,
+    Camera, Environment, Frame, Mesh, Object, Pose, Result, Scene, environment::luminance, shapes,
 };
 
 use super::{framed, still, white};
@@ -68,7 +68,46 @@ pub const STRESS_SCENES: &[(&str, &str)] = &[
         "sun-only",
         "SH truncation and sampling: a sphere on a floor under a black sky with one small sun holding all the light",
     ),
+    (
+        "scan-on-floor",
+        "nothing: the plain twin of the three scenes after it, a 1 m scan (the 1.8k-vertex bunny) resting on a floor 3 m across under a white sky",
+    ),
+    (
+        "large-floor",
+        "tolerances taken from the whole scene: the same scan resting on a floor 200 m across, which must change nothing",
+    ),
+    (
+        "far-away",
+        "tolerances taken from the world's origin: the scan on its 3 m floor 10 km from the origin",
+    ),
+    (
+        "scaled-up",
+        "absolute tolerances and f32 range: the scan on its floor scaled by 10⁷",
+    ),
 ];
+
+/// The stress scenes that are another one moved, scaled or given a larger
+/// floor, and that one, their plain twin: each must give what its twin
+/// gives.
+pub const TWINS: &[(&str, &str)] = &[
+    ("large-floor", "scan-on-floor"),
+    ("far-away", "scan-on-floor"),
+    ("scaled-up", "scan-on-floor"),
+];
+
+/// The plain twin of stress scene `name`, if it has one ([`TWINS`]).
+pub fn twin_of(name: &str) -> Option<&'static str> {
+    TWINS.iter().find(|(s, _)| *s == name).map(|(_, t)| *t)
+}
+
+/// Where `far-away` stands: 10 km from the origin, off the axes.
+pub const FAR_AWAY: Vec3 = Vec3::new(6000.0, 0.0, -8000.0);
+
+/// How much larger `scaled-up` is than its twin.
+pub const SCALED_UP: f32 = 1e7;
+
+/// The floor of `large-floor`, in heights of the scan.
+pub const LARGE_FLOOR: f32 = 200.0;
 
 /// The kept triangles of the `slivers` fan: needles from one apex to 500
 /// points along an edge 1 m away and 0.4 m long (8e-4 m apart).
@@ -112,6 +151,19 @@ pub fn stress_scene(name: &str) -> Result<StressScene> {
         "slivers" => (slivers(name)?, uniform()),
         "coarse" => (coarse(name)?, uniform()),
         "sun-only" => (still(name, sphere_on_floor(1.0, 31)?)?, sun()?),
+        "scan-on-floor" => (scan_on_floor(name, 3.0, Affine3A::IDENTITY)?, uniform()),
+        "large-floor" => (
+            scan_on_floor(name, LARGE_FLOOR, Affine3A::IDENTITY)?,
+            uniform(),
+        ),
+        "far-away" => (
+            scan_on_floor(name, 3.0, Affine3A::from_translation(FAR_AWAY))?,
+            uniform(),
+        ),
+        "scaled-up" => (
+            scan_on_floor(name, 3.0, Affine3A::from_scale(Vec3::splat(SCALED_UP)))?,
+            uniform(),
+        ),
         _ => unreachable!("every listed stress scene is built"),
     };
     Ok(StressScene {
@@ -234,6 +286,52 @@ fn sphere_on_floor(size: f32, cells: u32) -> Result<Vec<Mesh>> {
     let r = 0.2 * size;
     let floor = shapes::floor("floor", Vec3::ZERO, 0.5 * size, cells)?;
     Ok(vec![floor, sphere("sphere", Vec3::new(0.0, r, 0.0), r)?])
+}
+
+/// The shipped 1.8k-vertex bunny scaled to 1 m high, resting with its
+/// lowest point on the centre of a two-triangle floor `floor` m across,
+/// the whole then placed by `place` (a translation or a uniform scaling,
+/// applied to the positions themselves, as a file placed there would hold
+/// them). Normals are the asset's, turned with it. The camera is the plain
+/// twin's, placed the same way, so that its images show the same view.
+fn scan_on_floor(name: &str, floor: f32, place: Affine3A) -> Result<Scene> {
+    let path = super::assets_dir().join("meshes/bunny_npm_1839v.glb");
+    let (objects, _) = crate::gltf::GltfAsset::load(&path)?.to_scene_parts(white(), 30.0, 1)?;
+    let scan = &objects[0].mesh;
+    let bounds = scan.bounds();
+    let scale = 1.0 / bounds.extent().y;
+    let foot = Vec3::new(bounds.center().x, bounds.min.y, bounds.center().z);
+    let fit = Affine3A::from_scale(Vec3::splat(scale)) * Affine3A::from_translation(-foot);
+    let moved = |mesh: &Mesh, t: Affine3A| {
+        let normal = t.matrix3.inverse().transpose();
+        Mesh::new(
+            mesh.name(),
+            mesh.positions()
+                .iter()
+                .map(|&p| t.transform_point3(p))
+                .collect(),
+            Some(mesh.normals().iter().map(|&n| normal * n).collect()),
+            mesh.triangles().to_vec(),
+        )
+    };
+    let twin = Camera::framing(
+        Vec3::new(0.0, 0.5, 0.0),
+        0.5 * (3.0f32 * 3.0 + 3.0 * 3.0 + 1.0).sqrt(),
+        Vec3::new(0.8, 0.6, 1.0),
+        160,
+        120,
+    )?;
+    let camera = Camera::new(
+        place.transform_point3(twin.eye),
+        place.transform_point3(twin.target),
+        twin.up,
+        twin.fov_y,
+        twin.width,
+        twin.height,
+    )?;
+    let floor = shapes::floor("floor", Vec3::ZERO, 0.5 * floor, 1)?;
+    let objects = [moved(scan, place * fit)?, moved(&floor, place)?].map(object);
+    Scene::still(name, objects.to_vec(), camera)
 }
 
 /// A floor 2 m across (16×16 cells) and 0.3 m above it a flat fan facing up:
