@@ -10,7 +10,7 @@ use deferred_shadow::{Config, DeferredShadow};
 use glam::{Vec3, Vec4};
 use shadow_core::{
     Brdf, Camera, Environment, Error, Object, Scene, ShadowMethod,
-    gpu::{GpuContext, GpuStages, test_context},
+    gpu::{GpuStages, limited_test_context, test_context},
     shapes,
 };
 use support::patchy;
@@ -68,38 +68,6 @@ fn an_image_too_wide_for_the_device_is_an_error_of_the_stage() {
     assert!(image.covered.iter().filter(|c| **c).count() > 100);
 }
 
-/// Waits for a future that wgpu's native backend resolves at once.
-fn block_on<F: Future>(future: F) -> F::Output {
-    let mut future = std::pin::pin!(future);
-    let mut context = std::task::Context::from_waker(std::task::Waker::noop());
-    loop {
-        if let std::task::Poll::Ready(value) = future.as_mut().poll(&mut context) {
-            return value;
-        }
-        std::thread::yield_now();
-    }
-}
-
-/// A host's device on the test adapter whose storage bindings hold at most
-/// `bytes`: wgpu's default handler panics on any error raised outside a
-/// capture there.
-fn small_device(bytes: u64) -> Arc<GpuContext> {
-    let _shared = test_context();
-    let instance = wgpu::Instance::new(shadow_core::gpu::instance_descriptor());
-    let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-        .expect("the adapter test_context found");
-    let limits = wgpu::Limits {
-        max_storage_buffer_binding_size: bytes,
-        ..wgpu::Limits::default().or_worse_values_from(&adapter.limits())
-    };
-    let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        required_limits: limits,
-        ..Default::default()
-    }))
-    .expect("a device with lower limits");
-    Arc::new(GpuContext::from_device(device, queue))
-}
-
 /// More map storage than the device binds is refused as a configuration
 /// error that names the settings, the bytes needed and the limit, before
 /// anything is allocated; settings that fit run on the same device.
@@ -110,7 +78,7 @@ fn small_device(bytes: u64) -> Arc<GpuContext> {
 )]
 fn maps_beyond_the_device_limit_are_refused_by_name() {
     let limit = 1 << 20;
-    let ctx = small_device(limit);
+    let ctx = limited_test_context(|l| l.max_storage_buffer_binding_size = limit);
     let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
     // 32 lights and 128² maps (64 KiB each): more than the 16 maps 1 MiB
     // holds on this scene.

@@ -148,9 +148,12 @@ fn a_floor_under_a_square_matches_the_form_factor() {
     for (object, extent, first) in receivers {
         for (i, p) in object.positions().iter().enumerate() {
             let v = first + i;
-            let expected = Y00 * PI * (1.0 - rectangle_form_factor(*p, H, extent, extent));
+            // Seen from the ray origins, the vertex lifted along its normal
+            // (toward the other plane, H away).
+            let lift = object.lifts()[i];
+            let expected = Y00 * PI * (1.0 - rectangle_form_factor(*p, H - lift, extent, extent));
             let (x, se) = (r.transfer(v)[0], r.std_error()[v * 25]);
-            // Slack: the ray origins sit a 10⁻⁴ diagonal off the surface,
+            // Slack: the origins back up by half a lift along each ray,
             // which moves the blocker by that much relative to its distance.
             assert!(
                 (x - expected).abs() <= T31 * se + 2e-4,
@@ -159,9 +162,21 @@ fn a_floor_under_a_square_matches_the_form_factor() {
         }
     }
     // The floor's centre (vertex 40) under the square: four corners of
-    // X = Y = 1, F = (4/π)(1/√2) atan(1/√2).
+    // X = Y = 1, F = (4/π)(1/√2) atan(1/√2), from the vertex itself; its
+    // receiver sits a lift (1% of its 0.35 m edges) closer.
     let centre = r.transfer(40)[0] / (Y00 * PI);
-    assert_relative_eq!(1.0 - centre, 0.5541, epsilon = 5e-3);
+    let lifted = rectangle_form_factor(
+        Vec3::ZERO,
+        H - frame.objects[0].lifts()[40],
+        [-S, S],
+        [-S, S],
+    );
+    assert_relative_eq!(
+        rectangle_form_factor(Vec3::ZERO, H, [-S, S], [-S, S]),
+        0.5541,
+        epsilon = 1e-4
+    );
+    assert_relative_eq!(1.0 - centre, lifted, epsilon = 5e-3);
 }
 
 #[test]

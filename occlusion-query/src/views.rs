@@ -1,10 +1,13 @@
 //! Where each light direction's depth map looks from (§3.2: orthographic,
-//! fitted to the scene's bounding sphere) and where it sits in the atlas the
-//! maps of a batch of directions share.
+//! fitted to the scene's bounding sphere; here to each [`Regions`]'s
+//! sphere) and where it sits in the atlas the maps of a batch of directions
+//! share.
 
 use glam::{Mat4, Vec3, Vec4};
+use shadow_core::Aabb;
 
 use crate::lightsphere::Lightsphere;
+use crate::visibility::TestOffset;
 
 shadow_core::wgsl_struct! {
     /// One direction as the shaders read it.
@@ -13,42 +16,172 @@ shadow_core::wgsl_struct! {
     pub struct GpuDirection {
         /// World (or model) space to the clip space of the direction's map.
         pub clip_from_world: Mat4,
-        /// Toward the light (xyz); w is padding (a direction's weight depends
-        /// on the level shaded, and travels with the incoming radiance).
+        /// Toward the light (xyz), and the side of one texel of the map in
+        /// world units (w), which the tests' offsets are measured in (a
+        /// direction's weight depends on the level shaded, and travels with
+        /// the incoming radiance).
         pub light: Vec4,
     }
 }
 
 /// The orthographic view of a sphere (`centre`, `radius`) from direction
 /// `light` (toward the light): x and y span the sphere's disc, depth runs
-/// from 0 on the light's side of the sphere to 1 on the far side, so every
-/// point within `radius` of the centre is inside the view volume.
-pub fn orthographic(light: Vec3, centre: Vec3, radius: f32) -> Mat4 {
+/// from 0 at `reach` toward the light from the centre to 1 on the sphere's
+/// far side, so every point within `radius` of the centre, and every
+/// occluder between it and the light within `reach`, is inside the view
+/// volume (`reach` ≥ `radius`).
+pub fn orthographic(light: Vec3, centre: Vec3, radius: f32, reach: f32) -> Mat4 {
     // Whether the map is mirrored does not matter: occluders are drawn
     // without culling, and every test maps points the same way.
     let (u, v) = light.any_orthonormal_pair();
     let inv = 1.0 / radius;
+    let depth = 1.0 / (radius + reach);
     Mat4::from_cols(
-        Vec4::new(u.x * inv, v.x * inv, -light.x * 0.5 * inv, 0.0),
-        Vec4::new(u.y * inv, v.y * inv, -light.y * 0.5 * inv, 0.0),
-        Vec4::new(u.z * inv, v.z * inv, -light.z * 0.5 * inv, 0.0),
+        Vec4::new(u.x * inv, v.x * inv, -light.x * depth, 0.0),
+        Vec4::new(u.y * inv, v.y * inv, -light.y * depth, 0.0),
+        Vec4::new(u.z * inv, v.z * inv, -light.z * depth, 0.0),
         Vec4::new(
             -u.dot(centre) * inv,
             -v.dot(centre) * inv,
-            0.5 + light.dot(centre) * 0.5 * inv,
+            (reach + light.dot(centre)) * depth,
             1.0,
         ),
     )
 }
 
-/// Every direction of `sphere` viewing the sphere (`centre`, `radius`).
-pub fn directions(sphere: &Lightsphere, centre: Vec3, radius: f32) -> Vec<GpuDirection> {
-    sphere
-        .directions()
+/// How many times the diameter of its smallest object a region's sphere
+/// may span: at the default 512² maps every object keeps at least 32
+/// texels across, wherever it stands and whatever else the scene holds.
+pub const REGION_SPAN: f32 = 16.0;
+
+/// At most this many regions: past it the two whose union is smallest are
+/// merged (a scene of many small objects spread far apart).
+pub const MAX_REGIONS: usize = 16;
+
+/// The regions a frame's maps are fitted to: groups of objects whose
+/// vertices are tested against one map per direction. The paper fits one
+/// map to the whole scene (§3.2); then a small object on a large floor has
+/// a few texels and loses its self-shadowing and its contact. Objects share
+/// a region while its bounds span at most [`REGION_SPAN`] times the
+/// diagonal of the smallest of them, so that the texel follows the size of
+/// what is tested, never the scene's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Regions {
+    /// Per object, its region.
+    pub of_object: Vec<u32>,
+    /// Per region, the sphere holding its objects' vertices.
+    pub spheres: Vec<(Vec3, f32)>,
+    /// The sphere holding every vertex: what the maps' depth must reach.
+    pub scene: (Vec3, f32),
+}
+
+impl Regions {
+    /// The regions of objects whose vertices are `objects` (world space).
+    pub fn new(objects: &[&[Vec4]]) -> Regions {
+        let bounds: Vec<Aabb> = objects
+            .iter()
+            .map(|p| Aabb::from_points(p.iter().map(|p| p.truncate())))
+            .collect();
+        // Largest first, so that small objects join the region of the large
+        // one they stand on when it is small enough.
+        let mut order: Vec<usize> = (0..objects.len()).collect();
+        order.sort_by(|&a, &b| bounds[b].diagonal().total_cmp(&bounds[a].diagonal()));
+        // (bounds, smallest member diagonal, members)
+        let mut groups: Vec<(Aabb, f32, Vec<usize>)> = Vec::new();
+        for o in order {
+            let size = bounds[o].diagonal();
+            let joins = groups.iter_mut().find(|(b, smallest, _)| {
+                b.union(bounds[o]).diagonal() <= REGION_SPAN * smallest.min(size)
+            });
+            match joins {
+                Some((b, smallest, members)) => {
+                    *b = b.union(bounds[o]);
+                    *smallest = smallest.min(size);
+                    members.push(o);
+                }
+                None => groups.push((bounds[o], size, vec![o])),
+            }
+        }
+        while groups.len() > MAX_REGIONS {
+            let mut best = (0, 1, f32::INFINITY);
+            for i in 0..groups.len() {
+                for j in i + 1..groups.len() {
+                    let d = groups[i].0.union(groups[j].0).diagonal();
+                    if d < best.2 {
+                        best = (i, j, d);
+                    }
+                }
+            }
+            let (b, smallest, members) = groups.swap_remove(best.1);
+            let g = &mut groups[best.0];
+            g.0 = g.0.union(b);
+            g.1 = g.1.min(smallest);
+            g.2.extend(members);
+        }
+        let mut of_object = vec![0; objects.len()];
+        let spheres = (groups.iter().enumerate())
+            .map(|(r, (_, _, members))| {
+                for &o in members {
+                    of_object[o] = r as u32;
+                }
+                let points: Vec<Vec4> = members.iter().flat_map(|&o| objects[o].to_vec()).collect();
+                bounding_sphere(&points)
+            })
+            .collect();
+        let all: Vec<Vec4> = objects.iter().flat_map(|p| p.to_vec()).collect();
+        Regions {
+            of_object,
+            spheres,
+            scene: bounding_sphere(&all),
+        }
+    }
+
+    /// One region holding everything.
+    pub fn whole(points: &[Vec4]) -> Regions {
+        Regions::new(&[points])
+    }
+}
+
+/// A sphere holding every point: the centre of their bounds, and the largest
+/// distance from it.
+pub fn bounding_sphere(positions: &[Vec4]) -> (Vec3, f32) {
+    let points = positions.iter().map(|p| p.truncate());
+    let bounds = Aabb::from_points(points.clone());
+    let centre = bounds.center();
+    let radius = points.map(|p| p.distance(centre)).fold(0.0f32, f32::max);
+    (centre, radius.max(f32::MIN_POSITIVE))
+}
+
+/// Every region's view of every direction of `sphere`, region by region
+/// (view `r · k + j` for direction j of region r, k = `sphere.len()`), for
+/// `map`-sided maps: region r's sphere grown by a hundredth and by the
+/// farthest that `offset` moves a tested vertex, so that moved vertices stay
+/// inside the view volume (where the paper's queries are reliable), seen
+/// from direction j, its depth reaching the scene's far side toward the
+/// light; the texel the offsets are measured in travels with the light
+/// ([`GpuDirection::light`]).
+pub fn views(
+    sphere: &Lightsphere,
+    regions: &Regions,
+    map: u32,
+    offset: &TestOffset,
+) -> Vec<GpuDirection> {
+    let (scene_centre, scene_radius) = regions.scene;
+    regions
+        .spheres
         .iter()
-        .map(|&light| GpuDirection {
-            clip_from_world: orthographic(light, centre, radius),
-            light: light.extend(0.0),
+        .flat_map(|&(centre, radius)| {
+            let inner = radius * 1.01;
+            let texel = 2.0 * inner / map as f32;
+            let outer = inner + offset.reach(texel);
+            sphere.directions().iter().map(move |&light| {
+                // Occluders stand anywhere in the scene's sphere.
+                let reach = (light.dot(scene_centre - centre) + scene_radius).max(outer);
+                GpuDirection {
+                    clip_from_world: orthographic(light, centre, outer, reach),
+                    light: light.extend(texel),
+                }
+            })
         })
         .collect()
 }
@@ -117,7 +250,7 @@ mod tests {
             Vec3::NEG_Y,
             Vec3::new(0.3, -0.4, 0.866).normalize(),
         ] {
-            let m = orthographic(light, centre, 2.0);
+            let m = orthographic(light, centre, 2.0, 2.0);
             // Nearest to the light: depth 0; farthest: 1; centre: ½.
             assert_relative_eq!(
                 (m * (centre + 2.0 * light).extend(1.0)).z,

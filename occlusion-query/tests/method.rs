@@ -10,7 +10,7 @@ use glam::{Affine3A, Quat, Vec3};
 use occlusion_query::{
     Config, DepthOffset, Filtering, Level, Normalization, OcclusionQuery, VertexTest, Weights,
 };
-use shadow_core::gpu::{GpuContext, GpuStages, test_context};
+use shadow_core::gpu::{GpuContext, GpuStages, limited_test_context, test_context};
 use shadow_core::{
     Brdf, Camera, DirectionalVisibility, Environment, Error, Export, Frame, Mesh, Object, Pose,
     Scene, ShadowMethod, Stage, raster, shapes,
@@ -141,18 +141,90 @@ fn white_furnace_gives_the_albedo() {
             ..Config::default()
         };
         let (_, shaded) = shade(&ctx, raw, &sphere, &env);
-        let worst = shaded
-            .iter()
-            .map(|x| (x.x - 0.7).abs() / 0.7)
-            .fold(0.0f32, f32::max);
-        raw_errors.push(worst);
+        let errors: Vec<f32> = shaded.iter().map(|x| (x.x - 0.7) / 0.7).collect();
+        let worst = errors.iter().fold(0.0f32, |a, &b| a.max(b.abs()));
+        let mean = errors.iter().sum::<f32>() / errors.len() as f32;
+        raw_errors.push((worst, mean));
     }
-    println!("raw quadrature: worst relative error per level {raw_errors:?}");
-    assert!(raw_errors[0] > 0.2, "{raw_errors:?}");
-    assert!(
-        raw_errors[4] < 0.02 && raw_errors[4] < raw_errors[2],
-        "{raw_errors:?}"
-    );
+    // The raw quadrature, as the paper sums it, with no per-vertex scaling
+    // to hide a global weight error: its worst vertex within the level's
+    // quadrature error and the default offset's acne, and its mean over the
+    // sphere's normals within a hundredth of ρ at every level (a weight off
+    // by a constant factor would move every vertex by it). Measured, worst
+    // and mean for k = 6 to 1026: 37%, 10%, 3.6%, 1.4%, 1.1%; 0.45%, 0.11%,
+    // −0.22%, −0.19%, −0.21%.
+    println!("raw quadrature: (worst, mean) relative error per level {raw_errors:?}");
+    let bounds = [0.45, 0.13, 0.045, 0.018, 0.015];
+    for (s, (&(worst, mean), bound)) in raw_errors.iter().zip(bounds).enumerate() {
+        assert!(worst < bound, "level {s}: worst {worst}");
+        assert!(mean.abs() < 0.01, "level {s}: mean {mean}");
+    }
+    assert!(raw_errors[0].0 > 0.2, "{raw_errors:?}");
+}
+
+/// An unoccluded glossy sphere (normalized Phong, ρ_s = 1, exponent 20, no
+/// diffuse part) under a uniform unit sky at k = 1026: within 3% (relative
+/// L2 over the vertices; measured 1.1% with the raw quadrature and with
+/// per-vertex normalization) of the lobe's exact integral over each
+/// vertex's hemisphere, seen from the camera. Nothing in the crate checked
+/// the lobe's magnitude.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn glossy_furnace_gives_the_lobe_s_integral() {
+    let ctx = test_context();
+    let ball = shapes::uv_sphere("ball", Vec3::ZERO, 1.0, 16, 32).unwrap();
+    let material = Brdf::phong(Vec3::ZERO, Vec3::ONE, 20.0).unwrap();
+    let object = Object {
+        mesh: Arc::new(ball.clone()),
+        material,
+    };
+    let scene = Scene::still("glossy", vec![object], camera()).unwrap();
+    let env = Environment::uniform(Vec3::ONE);
+    let eye = scene.camera().eye;
+    // ∫ f(n, ω, v) max(0, n·ω) dω on a 512 × 1024 lat-long grid.
+    let exact = |p: Vec3, n: Vec3| {
+        let view = (eye - p).normalize();
+        let (rows, cols) = (512, 1024);
+        let mut sum = 0.0f64;
+        for i in 0..rows {
+            let theta = PI * (i as f32 + 0.5) / rows as f32;
+            let area = theta.sin() * (PI / rows as f32) * (2.0 * PI / cols as f32);
+            for j in 0..cols {
+                let phi = 2.0 * PI * (j as f32 + 0.5) / cols as f32;
+                let w = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                );
+                let c = n.dot(w);
+                if c > 0.0 {
+                    sum += f64::from(material.eval(n, w, view).x * c * area);
+                }
+            }
+        }
+        sum as f32
+    };
+    let truth: Vec<f32> = (0..ball.vertex_count())
+        .step_by(7)
+        .map(|v| exact(ball.positions()[v], ball.normals()[v]))
+        .collect();
+    for normalization in [Normalization::Off, Normalization::PerVertex] {
+        let config = Config {
+            level: level(4),
+            normalization,
+            ..Config::default()
+        };
+        let (_, shaded) = shade(&ctx, config, &scene, &env);
+        let got: Vec<f32> = shaded.iter().step_by(7).map(|x| x.x).collect();
+        let num: f32 = got.iter().zip(&truth).map(|(g, t)| (g - t).powi(2)).sum();
+        let den: f32 = truth.iter().map(|t| t * t).sum();
+        let error = (num / den).sqrt();
+        println!("glossy furnace, {normalization:?}: relative L2 error {error}");
+        assert!(error < 0.03, "{normalization:?}: {error}");
+    }
 }
 
 /// The form factor of a polygon (counter-clockwise seen from `p`'s side)
@@ -258,32 +330,27 @@ fn queries_and_depth_compare_agree() {
     }
     // Every pair that differs has its vertex within a tenth of a texel of a
     // texel's edge, where the rasterizer's coverage of a point and the
-    // compute pass's floor() may part (seen: 74 pairs in 110k, all within
-    // 0.06 texel).
+    // compute pass's floor() may part (seen: 46 pairs in 128k, all within
+    // 0.002 texel but one at a contact, below).
     let size = config.map_resolution as f32;
-    let frame = scene.frame_geometry(0).unwrap();
-    let positions: Vec<Vec3> = frame
-        .objects
-        .iter()
-        .flat_map(|o| o.positions().to_vec())
-        .collect();
-    let normals: Vec<Vec3> = frame
-        .objects
-        .iter()
-        .flat_map(|o| o.normals().to_vec())
-        .collect();
+    // The scene's one region: the floor's sphere, 2√2 m across.
+    let texel = 2.0 * 1.01 * 2.0f32.sqrt() * 2.0 / size;
     let mut farthest_from_an_edge = 0.0f32;
-    for (i, p) in positions.iter().enumerate() {
+    for i in 0..scene.vertex_count() {
         for j in 0..a.directions.len() {
             if a.is_visible(i, j) != b.is_visible(i, j) {
-                let (view, offset) = compare.map_view(j).unwrap();
-                let moved =
-                    *p + a.directions[j] * offset.toward_light + normals[i] * offset.along_normal;
+                let (view, moved) = compare.map_view(i, j).unwrap();
                 let c = view * moved.extend(1.0);
                 let x = (c.x * 0.5 + 0.5) * size;
                 let y = (0.5 - c.y * 0.5) * size;
                 let edge = (x - x.round()).abs().min((y - y.round()).abs());
-                farthest_from_an_edge = farthest_from_an_edge.max(edge);
+                // At the balls' contacts with the floor the tested point
+                // moves no further than halfway to it and sits on the
+                // floor's depth, where the two tests round apart (seen: one
+                // pair, 2 mm over the floor).
+                if moved.y > texel {
+                    farthest_from_an_edge = farthest_from_an_edge.max(edge);
+                }
             }
         }
     }
@@ -776,4 +843,102 @@ fn weights_are_selectable() {
     let (method, _) = shade(&ctx, equal, &scene, &env);
     let v = visibility(&method);
     assert!(v.weights.iter().all(|w| (w - 4.0 * PI / 18.0).abs() < 1e-6));
+}
+
+/// Simplified occluders deviate from the mesh by a bound meshopt measures
+/// in the rest mesh's units; the tested vertices move off their surface by
+/// it in the world's. A ball posed at ten times its rest size moves its
+/// vertices as the same ball modelled ten times larger does (it moved them
+/// a tenth as far: the bound was taken in rest units and applied in world
+/// units).
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn simplified_occluders_offset_in_world_units() {
+    let ctx = test_context();
+    let ball = shapes::uv_sphere("ball", Vec3::new(0.0, 0.6, 0.0), 0.5, 32, 64).unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 8).unwrap();
+    let scaled = |m: &Mesh| {
+        Mesh::new(
+            m.name(),
+            m.positions().iter().map(|&p| p * 10.0).collect(),
+            Some(m.normals().to_vec()),
+            m.triangles().to_vec(),
+        )
+        .unwrap()
+    };
+    let objects = |meshes: [Mesh; 2]| {
+        meshes
+            .map(|mesh| Object {
+                mesh: Arc::new(mesh),
+                material: lambert(0.8),
+            })
+            .to_vec()
+    };
+    let far = Camera::new(
+        Vec3::new(5.0, 25.0, 40.0),
+        Vec3::new(0.0, 3.0, 0.0),
+        Vec3::Y,
+        0.9,
+        64,
+        48,
+    )
+    .unwrap();
+    let modelled = Scene::still("modelled", objects([scaled(&ball), scaled(&floor)]), far).unwrap();
+    let posed = Scene::new(
+        "posed",
+        objects([ball.clone(), scaled(&floor)]),
+        vec![Frame {
+            time: 0.0,
+            poses: vec![
+                Pose::Rigid(Affine3A::from_scale(Vec3::splat(10.0))),
+                Pose::Rigid(Affine3A::IDENTITY),
+            ],
+        }],
+        far,
+    )
+    .unwrap();
+    let config = Config::fast();
+    let env = Environment::uniform(Vec3::ONE);
+    let (a, _) = shade(&ctx, config, &modelled, &env);
+    let (b, _) = shade(&ctx, config, &posed, &env);
+    let p = ball.positions()[100] * 10.0;
+    let (_, moved_a) = a.map_view(100, 0).unwrap();
+    let (_, moved_b) = b.map_view(100, 0).unwrap();
+    let (da, db) = (moved_a.distance(p), moved_b.distance(p));
+    assert!(da > 0.0 && (db - da).abs() < 1e-3 * da, "{da} against {db}");
+}
+
+/// A host's device below what the method binds is refused by name when the
+/// scene is prepared, never with a raw validation error: shade.wgsl's eight
+/// storage buffers (4 were asked for, so a device of 4 failed inside wgpu),
+/// and a visibility buffer (⌈k/32⌉ words per vertex) larger than one
+/// binding.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn limits_a_device_lacks_are_named() {
+    let scene = scene(floor_and_ball(), 0.8);
+    let few = limited_test_context(|l| l.max_storage_buffers_per_shader_stage = 4);
+    let mut method = OcclusionQuery::new(few, Config::default()).unwrap();
+    let refused = method.prepare(&scene);
+    let Err(Error::Gpu(what)) = refused else {
+        panic!("{refused:?}")
+    };
+    assert!(
+        what.contains("max_storage_buffers_per_shader_stage 8"),
+        "{what}"
+    );
+    // 9 words a vertex at k = 258: 36 bytes, so 1 KiB holds 28 vertices.
+    let small = limited_test_context(|l| l.max_storage_buffer_binding_size = 1024);
+    let mut method = OcclusionQuery::new(small, Config::default()).unwrap();
+    let refused = method.prepare(&scene);
+    let Err(Error::Gpu(what)) = refused else {
+        panic!("{refused:?}")
+    };
+    assert!(what.contains("max_storage_buffer_binding_size"), "{what}");
 }

@@ -9,6 +9,7 @@
 
 mod brdf;
 mod camera;
+pub mod contact;
 pub mod environment;
 mod error;
 mod export;

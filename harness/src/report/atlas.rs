@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Block, Document, Report, ReportRun, Table};
 use crate::run::RunResult;
+use crate::scenes::stress::twin_of;
 use crate::{methods::MethodSpec, reference::ReferenceInfo};
 
 /// A stress scene of the atlas and its reference.
@@ -151,8 +152,28 @@ impl AtlasRun {
 pub fn judge(atlas: &[AtlasRun], tried: &[AtlasRun], standard: &[ReportRun]) -> Vec<AtlasRun> {
     let mut judged = Vec::new();
     for run in atlas.iter().filter(|r| r.remedy_for.is_none()) {
+        let twin = twin_of(&run.scene).and_then(|twin| {
+            let on_twin = atlas
+                .iter()
+                .find(|r| r.scene == twin && r.setting == run.setting && r.remedy_for.is_none())?;
+            Some((twin, on_twin.mean_error()?))
+        });
+        let mut diagnosis = diagnose(&run.setting, &run.outcome, standard);
+        if let (Some((twin, twin_error)), Some(error)) = (twin, run.mean_error()) {
+            diagnosis = format!(
+                "{} It gives {:.2}× its error on the plain twin {twin} ({:.2}%){}.",
+                diagnosis,
+                error / twin_error,
+                twin_error * 100.0,
+                if error > TWIN_FACTOR * twin_error {
+                    ", more than the twin allows: a tolerance taken from the scene's size or place"
+                } else {
+                    ""
+                }
+            );
+        }
         let run = AtlasRun {
-            diagnosis: diagnose(&run.setting, &run.outcome, standard),
+            diagnosis,
             ..run.clone()
         };
         let remedy = run
@@ -171,6 +192,11 @@ pub const FAILURE_FACTOR: f32 = 2.0;
 
 /// The mean error below which no setting fails on a stress scene.
 pub const FAILURE_FLOOR: f32 = 0.05;
+
+/// How many times its error on a stress scene's plain twin
+/// ([`crate::scenes::stress::TWINS`]) a setting may reach on the moved,
+/// scaled or enlarged scene.
+pub const TWIN_FACTOR: f32 = 1.25;
 
 /// The sentence: how the mean error compares with the setting's median on
 /// the standard scenes, whether the error is everywhere or concentrated in

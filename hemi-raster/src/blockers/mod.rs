@@ -20,7 +20,7 @@
 //! below it and are culled as before. Another surface through the lifted
 //! point blocks the half it covers (the module docs of [`crate::raster`]),
 //! and a receiver pressed on another object or buried in a closed one
-//! sees nothing ([`enclosure`]).
+//! sees nothing ([`shadow_core::contact`]).
 //!
 //! # The space
 //! Positions are held relative to the centre of the frame's bounds and
@@ -39,7 +39,6 @@ use shadow_core::{FrameGeometry, Result};
 use crate::raster::TangentFrame;
 
 mod candidates;
-pub(crate) mod enclosure;
 mod layout;
 
 pub(crate) use candidates::Candidates;
@@ -63,8 +62,6 @@ pub(crate) struct Blockers {
     pub(crate) triangles: Vec<[u32; 3]>,
     /// Per object: its triangles' range and whether its back faces are culled.
     pub(crate) objects: Vec<(Range<usize>, bool)>,
-    /// Per object, the first of its vertices (and the total at the end).
-    vertex_starts: Vec<usize>,
     /// World to centred space: `(p − centre) · scale`.
     centre: Vec3,
     scale: f32,
@@ -102,13 +99,11 @@ impl Blockers {
             lifts: Vec::with_capacity(total),
             triangles: Vec::new(),
             objects: Vec::with_capacity(frame.objects.len()),
-            vertex_starts: Vec::with_capacity(frame.objects.len() + 1),
             centre: bounds.center(),
             scale,
         };
         for (object, &cull) in frame.objects.iter().zip(cull) {
             let base = b.x.len() as u32;
-            b.vertex_starts.push(b.x.len());
             for (&p, &lift) in object.positions().iter().zip(object.lifts()) {
                 let local = b.to_local(p);
                 b.x.push(local.x);
@@ -122,7 +117,6 @@ impl Blockers {
                 .extend(object.triangles().iter().map(|t| t.map(|i| i + base)));
             b.objects.push((start..b.triangles.len(), cull));
         }
-        b.vertex_starts.push(b.x.len());
         Ok(b)
     }
 
@@ -135,11 +129,6 @@ impl Blockers {
     /// Number of vertices, all objects together.
     pub(crate) fn vertex_count(&self) -> usize {
         self.x.len()
-    }
-
-    /// The object vertex `v` (a global index) belongs to.
-    pub(crate) fn object_of(&self, v: usize) -> usize {
-        self.vertex_starts.partition_point(|&start| start <= v) - 1
     }
 
     /// Vertex `i` (a global index), in the centred space.

@@ -12,7 +12,6 @@ use shadow_core::{Environment, Result};
 
 use super::simd::{Kernel, SimdToken};
 use super::{Columns, Scratch, UpdateProfile, receiver_mask};
-use crate::blockers::enclosure::Enclosure;
 use crate::blockers::{Blockers, Candidates, Layout};
 use crate::config::{Config, MaskResolution};
 use crate::hierarchy::TwoLevel;
@@ -76,10 +75,13 @@ impl<W: MaskRow> Pipeline<W> {
     }
 
     /// Every receiver's mask, in parallel; or, with `profile`, on the
-    /// calling thread with the loop's phases timed.
+    /// calling thread with the loop's phases timed. A receiver that
+    /// `enclosed` marks (pressed on another object or buried in one,
+    /// [`shadow_core::contact`]) sees nothing: its mask is the whole disk.
     pub(crate) fn rasterize(
         &mut self,
         blockers: &Blockers,
+        enclosed: &[bool],
         hierarchy: Option<&TwoLevel>,
         visible: Option<&VisibleSets>,
         profile: Option<&mut UpdateProfile>,
@@ -97,10 +99,9 @@ impl<W: MaskRow> Pipeline<W> {
             (None, Some(h)) => h.candidates(&layout, v),
             (None, None) => Candidates::All(&layout),
         };
-        let enclosure = Enclosure::new(blockers);
         let full = *self.raster.grid().disk();
         let mask = |scratch: &mut Scratch, v: usize| {
-            if enclosure.encloses(blockers, v) {
+            if enclosed[v] {
                 return full;
             }
             let frame = blockers.frame(v);

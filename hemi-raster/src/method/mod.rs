@@ -19,6 +19,24 @@ use crate::transfer::pixel_angle;
 
 use crate::name::NAME;
 
+/// Per vertex of `frame`, all objects one after another, whether it is
+/// pressed on another object or buried in another one whose back faces are
+/// culled (`cull`): such a receiver sees nothing, whatever its mask would
+/// say. The paper rasterizes every receiver alike; this is the reference's
+/// rule ([`shadow_core::contact`]), which a frame without another object
+/// near each vertex skips.
+fn enclosed(frame: &FrameGeometry, cull: &[bool]) -> Result<Vec<bool>> {
+    use rayon::prelude::*;
+    let contacts = shadow_core::contact::Contacts::new(frame, cull)?;
+    let vertices: Vec<(usize, usize)> = (frame.objects.iter().enumerate())
+        .flat_map(|(o, object)| (0..object.vertex_count()).map(move |v| (o, v)))
+        .collect();
+    Ok(vertices
+        .par_iter()
+        .map(|&(o, v)| contacts.enclosed(o, v))
+        .collect())
+}
+
 /// Kautz, Lehtinen and Aila 2004: per vertex, the blocker triangles of the
 /// frame (all objects: shadows between objects come for free) are
 /// rasterized into a hemispherical visibility mask, which `update`
@@ -178,8 +196,9 @@ impl HemiRaster {
             .ok_or_else(|| Error::stage(NAME, "update before prepare"))?;
         let start = Instant::now();
         let blockers = Blockers::new(frame, &prepared.cull)?;
+        let enclosed = enclosed(frame, &prepared.cull)?;
         let (hierarchy, visible) = (prepared.hierarchy.as_ref(), prepared.visible.as_ref());
-        with_pipeline!(engine, p => p.rasterize(&blockers, hierarchy, visible, profile.as_deref_mut()));
+        with_pipeline!(engine, p => p.rasterize(&blockers, &enclosed, hierarchy, visible, profile.as_deref_mut()));
         let visibility = start.elapsed();
         match self.config.integration {
             Integration::ShBlocks | Integration::ShPixels => {

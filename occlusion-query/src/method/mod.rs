@@ -90,9 +90,13 @@ struct State {
     transform: Affine3A,
     /// What was uploaded, to tell a changed frame from the same one.
     positions: Vec<Vec4>,
-    /// Every direction's map view, and the tested vertices' offset.
+    /// Every region's map view of every direction, the tested vertices'
+    /// offset, and each vertex's region.
     views: Vec<GpuDirection>,
     offset: TestOffset,
+    vertex_regions: Vec<u32>,
+    /// Each vertex's contact push ([`Visibility::set_contacts`]).
+    push: Vec<Vec4>,
     normals: Vec<Vec4>,
     /// The level every evaluated vertex has its visibility at.
     level: Level,
@@ -143,14 +147,31 @@ impl OcclusionQuery {
         self.sphere(self.config.finest())
     }
 
-    /// Where direction `j`'s depth map looks from in the current frame:
-    /// model space (world space unless the scene is one rigid object) to the
-    /// map's clip space, and how far each tested vertex moves before it is
-    /// compared. `None` before `update` or beyond the finest level.
-    pub fn map_view(&self, j: usize) -> Option<(Mat4, TestOffset)> {
+    /// Where the depth map that vertex `vertex` (all objects one after
+    /// another) is tested against for direction `j` looks from in the
+    /// current frame: model space (world space unless the scene is one rigid
+    /// object) to the map's clip space, and the point the vertex is
+    /// compared at, moved by the offsets. `None` before `update`, beyond the
+    /// finest level or the vertex count.
+    pub fn map_view(&self, vertex: usize, j: usize) -> Option<(Mat4, Vec3)> {
         let state = self.state.as_ref()?;
-        let view = state.views.get(j)?;
-        Some((view.clip_from_world, state.offset))
+        let region = *state.vertex_regions.get(vertex)? as usize;
+        if j >= state.offset.stride as usize {
+            return None;
+        }
+        let view = state.views.get(region * state.offset.stride as usize + j)?;
+        let (p, n) = (state.positions[vertex], state.normals[vertex]);
+        let (light, texel) = (view.light.truncate(), view.light.w);
+        let push = state.push[vertex];
+        let moved = (state.offset).moved(p.truncate(), n.truncate(), light, texel, push);
+        Some((view.clip_from_world, moved))
+    }
+
+    /// How many regions the current frame's maps are fitted to
+    /// ([`crate::views::Regions`]); `None` before `update`.
+    pub fn regions(&self) -> Option<usize> {
+        let state = self.state.as_ref()?;
+        Some(state.views.len() / (state.offset.stride as usize).max(1))
     }
 
     /// The lightsphere level the current visibility is at.

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use glam::{Mat3, Vec3, Vec4};
 use shadow_core::{Brdf, Mesh, Pose, Result, Scene, ShadowMethod, Stage};
 
-use super::update::bounding_sphere;
+use super::update::regions_of;
 use super::{Gpu, OcclusionQuery, Prepared};
 use crate::config::Occluder;
 use crate::filter::{CameraFilter, vertices_of};
@@ -23,8 +23,8 @@ impl OcclusionQuery {
         let mut triangles = Vec::new();
         let mut occluders = Vec::new();
         let mut objects = Vec::new();
-        // The depth maps' texel at the first frame, for how far simplified
-        // occluders may deviate.
+        // The depth maps' texels at the first frame, for how far simplified
+        // occluders may deviate: each object's region's, in world units.
         let first_frame = scene.frame_geometry(0)?;
         let meshes: Vec<&Mesh> = match &model {
             Some(model) => vec![model],
@@ -35,7 +35,12 @@ impl OcclusionQuery {
             .flat_map(|m| m.positions())
             .map(|p| p.extend(1.0))
             .collect();
-        let texel = 2.0 * 1.01 * bounding_sphere(&points).1 / self.config.map_resolution as f32;
+        let counts: Vec<usize> = meshes.iter().map(|m| m.vertex_count()).collect();
+        let regions = regions_of(&points, &counts, model.is_some());
+        let texel = |o: usize| {
+            let region = regions.of_object.get(o).map_or(0, |&r| r as usize);
+            2.0 * 1.01 * regions.spheres[region].1 / self.config.map_resolution as f32
+        };
         let mut first = 0u32;
         let mut simplification = 0.0f32;
         for (o, object) in scene.objects().iter().enumerate() {
@@ -44,8 +49,14 @@ impl OcclusionQuery {
             let drawn = match self.config.occluder {
                 Occluder::Full => mesh.triangles().to_vec(),
                 Occluder::Simplified { texels } => {
-                    let simplified = occluder::simplified(mesh, texels * texel)?;
-                    simplification = simplification.max(simplified.error);
+                    // The bound is in the rest mesh's units, the maps' texel
+                    // in the world's: the first pose's stretch relates them.
+                    let stretch = match &model {
+                        Some(_) => 1.0,
+                        None => occluder::stretch(mesh, &first_frame.objects[o]),
+                    };
+                    let simplified = occluder::simplified(mesh, texels * texel(o) / stretch)?;
+                    simplification = simplification.max(simplified.error * stretch);
                     simplified.triangles
                 }
             };

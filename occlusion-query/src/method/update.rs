@@ -5,14 +5,14 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{Affine3A, Mat4, Vec3, Vec4};
+use shadow_core::contact::Contacts;
 use shadow_core::{Camera, Error, FrameGeometry, Mesh, Result, Stage};
 
 use super::{Job, OcclusionQuery, Prepared, State};
 use crate::config::{Config, DepthOffset};
 use crate::filter::vertices_of;
-use crate::lightsphere::Lightsphere;
 use crate::name::NAME;
-use crate::views::{self, GpuDirection};
+use crate::views::{self, Regions};
 use crate::visibility::{Counts, TestOffset};
 
 impl OcclusionQuery {
@@ -53,8 +53,15 @@ impl OcclusionQuery {
     /// pass, which reads query results back.
     pub(super) fn plan(&mut self, frame: &FrameGeometry, camera: &Camera) -> Result<Vec<Job>> {
         let scene = self.prepared()?;
-        let (positions, normals, transform) = Self::geometry_of(frame, scene)?;
+        let (positions, mut normals, transform) = Self::geometry_of(frame, scene)?;
         let vertices = positions.len();
+        // Each vertex's region rides as its normal's w (module docs of
+        // `crate::views`).
+        let regions = regions_of(&positions, &scene.vertex_counts, scene.model.is_some());
+        let vertex_regions = vertex_regions(&regions, &scene.vertex_counts, vertices);
+        for (n, &r) in normals.iter_mut().zip(&vertex_regions) {
+            n.w = r as f32;
+        }
         let changed = match &self.state {
             None => true,
             // The rigid object's model-space mesh never changes.
@@ -65,12 +72,30 @@ impl OcclusionQuery {
         let scene = self.scene.as_mut().expect("checked above");
         let mut jobs = Vec::new();
         if changed {
-            let (centre, radius) = bounding_sphere(&positions);
             let finest = &self.spheres[self.config.finest().get() as usize];
-            let (directions, offset) =
-                fitted(finest, centre, radius, &self.config, scene.simplification);
+            let offset = test_offset(&self.config, finest.len(), scene.simplification);
+            let directions = views::views(finest, &regions, self.config.map_resolution, &offset);
             scene.gpu.geometry.write(&ctx, &positions, &normals);
-            scene.gpu.visibility.set_view(&ctx, &directions, offset);
+            (scene.gpu.visibility).set_view(&ctx, &directions, offset, vertex_regions.clone());
+            let (blocked, push) = match scene.model {
+                Some(_) => (Vec::new(), Vec::new()),
+                None => {
+                    // How far each vertex moves along its normal at most.
+                    let texels: Vec<f32> = (regions.spheres.iter())
+                        .map(|s| 2.0 * 1.01 * s.1 / self.config.map_resolution as f32)
+                        .collect();
+                    let reach = |v: usize| {
+                        offset.along_normal * texels[vertex_regions[v] as usize]
+                            + offset.simplification
+                    };
+                    contacts(frame, finest.directions(), reach)?
+                }
+            };
+            scene.gpu.visibility.set_contacts(&ctx, &blocked, &push);
+            let push = match push.is_empty() {
+                true => vec![Vec4::ZERO; vertices],
+                false => push,
+            };
             if let Some(filter) = &mut scene.gpu.filter {
                 filter.reset();
             }
@@ -82,6 +107,8 @@ impl OcclusionQuery {
                 normals,
                 views: directions,
                 offset,
+                vertex_regions,
+                push,
                 level,
                 evaluated: vec![scene.gpu.filter.is_none(); vertices],
                 lit: None,
@@ -208,35 +235,96 @@ impl OcclusionQuery {
     }
 }
 
-/// A sphere holding every point: the centre of their bounds, and the largest
-/// distance from it.
-pub(super) fn bounding_sphere(positions: &[Vec4]) -> (Vec3, f32) {
-    let points = positions.iter().map(|p| p.truncate());
-    let bounds = shadow_core::Aabb::from_points(points.clone());
-    let centre = bounds.center();
-    let radius = points.map(|p| p.distance(centre)).fold(0.0f32, f32::max);
-    (centre, radius.max(1e-6))
+/// What contacts with other objects do to the tests of each vertex of
+/// `frame` (all objects one after another; [`shadow_core::contact`]):
+/// `⌈k/32⌉` words of the directions `lights` (k of them) blocked whatever
+/// the maps say (every direction of a vertex pressed on another object's
+/// surface; at a contact, the floor under a box's side or the wall's foot
+/// on the floor, the directions that see the other surface's front), and
+/// the direction the vertex moves off the surfaces it touches before its
+/// tests (xyz) and how much of its move along its own normal (`reach`, per
+/// vertex) is cut short (w): no further than halfway to another object's
+/// surface. The paper's maps see the other surface edge-on there, and the
+/// vertex on it passes or fails their depth test by chance; and half a
+/// texel along the normal takes the underside of a model resting a
+/// millimetre over a floor through the floor, into the light below it.
+/// Buried vertices need no rule: the maps see the closed object around
+/// them. Empty when no vertex touches or nears anything.
+fn contacts(
+    frame: &FrameGeometry,
+    lights: &[Vec3],
+    reach: impl Fn(usize) -> f32 + Sync,
+) -> Result<(Vec<u32>, Vec<Vec4>)> {
+    use rayon::prelude::*;
+    let words = lights.len().div_ceil(32);
+    let contacts = Contacts::new(frame, &vec![false; frame.objects.len()])?;
+    let vertices: Vec<(usize, usize)> = (frame.objects.iter().enumerate())
+        .flat_map(|(o, object)| (0..object.vertex_count()).map(move |v| (o, v)))
+        .collect();
+    let mut bits = vec![0u32; vertices.len() * words];
+    let mut push = vec![Vec4::ZERO; vertices.len()];
+    bits.par_chunks_mut(words)
+        .zip(push.par_iter_mut())
+        .zip(vertices.par_iter().enumerate())
+        .for_each(|((out, push), (i, &(o, v)))| {
+            let contact = contacts.at(o, v);
+            for (j, l) in lights.iter().enumerate() {
+                if contact.enclosed || contact.planes.iter().any(|p| p.dot(*l) < 0.0) {
+                    out[j / 32] |= 1 << (j % 32);
+                }
+            }
+            let most = reach(i);
+            let cut = 1.0 - (0.5 * contacts.clearance(o, v, 2.0 * most) / most).min(1.0);
+            *push = (contact.planes.iter().sum::<Vec3>())
+                .normalize_or_zero()
+                .extend(cut);
+        });
+    Ok(
+        if bits.iter().all(|&w| w == 0) && push.iter().all(|&p| p == Vec4::ZERO) {
+            (Vec::new(), Vec::new())
+        } else {
+            (bits, push)
+        },
+    )
 }
 
-/// Every direction's view of the sphere (`centre`, `radius`), grown so that
-/// the tested vertices, once moved by their offsets, stay inside the view
-/// volume (where the paper's queries are reliable), and those offsets in
-/// world units; `simplification` adds to the move along the normal.
-fn fitted(
-    sphere: &Lightsphere,
-    centre: Vec3,
-    radius: f32,
-    config: &Config,
-    simplification: f32,
-) -> (Vec<GpuDirection>, TestOffset) {
-    let inner = radius * 1.01;
-    let texel = 2.0 * inner / config.map_resolution as f32;
-    let offset = TestOffset {
-        toward_light: config.offset.toward_light * texel,
-        along_normal: config.offset.along_normal * texel + simplification,
-        slope: config.offset.receiver_slope * texel,
+/// The regions of a frame whose objects have `counts` vertices each, one
+/// after another in `positions` (one region for a rigid object in model
+/// space).
+pub(super) fn regions_of(positions: &[Vec4], counts: &[usize], rigid: bool) -> Regions {
+    if rigid {
+        return Regions::whole(positions);
+    }
+    let mut objects = Vec::with_capacity(counts.len());
+    let mut first = 0;
+    for &n in counts {
+        objects.push(&positions[first..first + n]);
+        first += n;
+    }
+    Regions::new(&objects)
+}
+
+/// Each of `vertices` vertices' region.
+fn vertex_regions(regions: &Regions, counts: &[usize], vertices: usize) -> Vec<u32> {
+    if regions.of_object.len() != counts.len() {
+        return vec![0; vertices];
+    }
+    (counts.iter().zip(&regions.of_object))
+        .flat_map(|(&n, &r)| std::iter::repeat_n(r, n))
+        .collect()
+}
+
+/// The tested vertices' offset in texels of their region's maps
+/// (`config.offset`), the simplified occluders' bound in world units, and
+/// the views of a region per `directions` directions.
+fn test_offset(config: &Config, directions: usize, simplification: f32) -> TestOffset {
+    TestOffset {
+        toward_light: config.offset.toward_light,
+        along_normal: config.offset.along_normal,
+        slope: config.offset.receiver_slope,
         max_tan: DepthOffset::MAX_TAN,
-    };
-    let outer = inner + offset.toward_light + offset.slope * offset.max_tan + offset.along_normal;
-    (views::directions(sphere, centre, outer), offset)
+        simplification,
+        stride: directions as u32,
+        _pad: [0; 2],
+    }
 }

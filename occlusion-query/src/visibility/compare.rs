@@ -74,6 +74,8 @@ impl CompareTest {
                 storage(4, true, compute),
                 storage(5, false, compute),
                 texture(6, depth, compute),
+                storage(7, true, compute),
+                storage(8, true, compute),
             ],
         );
         let batches = Slots::new(ctx, "batches", batches);
@@ -89,6 +91,8 @@ impl CompareTest {
                 entry(4, shared.list.as_entire_binding()),
                 entry(5, shared.bits.as_entire_binding()),
                 entry(6, wgpu::BindingResource::TextureView(maps.view())),
+                entry(7, shared.blocked.as_entire_binding()),
+                entry(8, shared.push.as_entire_binding()),
             ],
         );
         CompareTest {

@@ -44,9 +44,10 @@ impl DepthMaps {
             ],
         );
         // The polygon offset (§3.2) on the occluders: factor × depth slope +
-        // units × the depth format's step. A texel is 1/map of the map's
-        // depth range (the view volume is a cube around the bounding
-        // sphere), so the clamp is in texels too.
+        // units × the depth format's step. The clamp is in 1/map of a
+        // map's depth range: texels where the view volume is the cube
+        // around the sphere (one region in a scene the region holds), a
+        // fraction of one where the depth reaches farther toward the light.
         let bias = wgpu::DepthBiasState {
             constant: config.offset.occluder_units as i32,
             slope_scale: config.offset.occluder_slope,
@@ -99,15 +100,15 @@ impl DepthMaps {
         &self.group
     }
 
-    /// The maps of the directions of `batch`, slot by slot: one render pass,
-    /// one indexed draw of every occluder per map, its viewport the map's
-    /// square of the atlas (one instanced draw into the whole atlas
+    /// The maps of `views`, each (slot of the atlas, view), in one render
+    /// pass: one indexed draw of every occluder per map, its viewport the
+    /// map's square of the atlas (one instanced draw into the whole atlas
     /// measured 30% slower on lavapipe).
     pub fn record(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         geometry: &Geometry,
-        batch: std::ops::Range<usize>,
+        views: impl Iterator<Item = (usize, u32)>,
     ) {
         let clear = wgpu::LoadOp::Clear(1.0);
         let mut pass = depth_pass(encoder, "depth maps", &self.view, clear, None);
@@ -115,12 +116,12 @@ impl DepthMaps {
         pass.set_bind_group(0, &self.group, &[]);
         pass.set_vertex_buffer(0, geometry.positions.slice(..));
         pass.set_index_buffer(geometry.occluders.slice(..), wgpu::IndexFormat::Uint32);
-        for (slot, j) in batch.enumerate() {
+        for (slot, view) in views {
             let (x, y) = self.atlas.origin(slot);
             let size = self.atlas.map;
             pass.set_viewport(x as f32, y as f32, size as f32, size as f32, 0.0, 1.0);
             pass.set_scissor_rect(x, y, size, size);
-            pass.draw_indexed(0..geometry.occluder_indices, 0, j as u32..j as u32 + 1);
+            pass.draw_indexed(0..geometry.occluder_indices, 0, view..view + 1);
         }
     }
 }

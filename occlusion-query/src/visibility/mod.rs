@@ -17,7 +17,7 @@ use shadow_core::gpu::{GpuContext, buffer::blank};
 use shadow_core::{Error, Result};
 
 use crate::config::{Config, VertexTest};
-use crate::views::{Atlas, GpuDirection};
+use crate::views::{Atlas, GpuDirection, MAX_REGIONS};
 use compare::CompareTest;
 use maps::DepthMaps;
 use queries::QueryTest;
@@ -68,6 +68,13 @@ impl Geometry {
         attributes: &wgpu::vertex_attr_array![0 => Float32x4],
     };
 
+    /// The vertex buffer of contact pushes (location 2).
+    pub(crate) const PUSH: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+        array_stride: 16,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![2 => Float32x4],
+    };
+
     /// The vertex buffer of normals (location 1).
     pub(crate) const NORMALS: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
         array_stride: 16,
@@ -77,10 +84,14 @@ impl Geometry {
 }
 
 shadow_core::wgsl_struct! {
-    /// How far each tested vertex moves before it is compared with a map, in
-    /// world units (see [`crate::DepthOffset`]): `toward_light` plus `slope`
-    /// times tan θ (θ between its normal and the light, tan θ at most
-    /// `max_tan`) toward the light, and `along_normal` along its normal.
+    /// How far each tested vertex moves before it is compared with a map
+    /// (see [`crate::DepthOffset`]), in texels of that map
+    /// ([`GpuDirection::light`]'s w): `toward_light` plus `slope` times
+    /// tan θ (θ between its normal and the light, tan θ at most `max_tan`)
+    /// toward the light, and `along_normal` along its normal, where
+    /// `simplification` adds the simplified occluders' bound in world
+    /// units; and where a region's views start (view `region · stride + j`
+    /// for direction j).
     #[repr(C)]
     #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
     pub struct TestOffset {
@@ -88,15 +99,30 @@ shadow_core::wgsl_struct! {
         pub along_normal: f32,
         pub slope: f32,
         pub max_tan: f32,
+        pub simplification: f32,
+        pub stride: u32,
+        pub _pad: [u32; 2],
     }
 }
 
 impl TestOffset {
-    /// Where a vertex at `p` with unit normal `n` is compared for light `l`.
-    pub fn moved(&self, p: Vec3, n: Vec3, l: Vec3) -> Vec3 {
+    /// Where a vertex at `p` with unit normal `n` is compared for light `l`
+    /// on a map of texel `texel`, given its contact `push` (the direction
+    /// it moves off the surfaces it touches, and how much of its move along
+    /// `n` is cut short: [`Visibility::set_contacts`]).
+    pub fn moved(&self, p: Vec3, n: Vec3, l: Vec3, texel: f32, push: Vec4) -> Vec3 {
         let c = n.dot(l).max(1e-6);
         let tan = ((1.0 - c * c).max(0.0).sqrt() / c).min(self.max_tan);
-        p + l * (self.toward_light + self.slope * tan) + n * self.along_normal
+        let along = (self.along_normal * texel + self.simplification) * (1.0 - push.w);
+        p + l * ((self.toward_light + self.slope * tan) * texel)
+            + n * along
+            + push.truncate() * (self.along_normal * texel)
+    }
+
+    /// The farthest it moves a vertex, on a map of texel `texel`.
+    pub fn reach(&self, texel: f32) -> f32 {
+        (self.toward_light + self.slope * self.max_tan + self.along_normal) * texel
+            + self.simplification
     }
 }
 
@@ -116,6 +142,14 @@ struct Shared {
     offset: wgpu::Buffer,
     list: wgpu::Buffer,
     bits: wgpu::Buffer,
+    /// Bits cleared whatever the maps say (laid out as `bits`): the
+    /// directions another object's surface blocks at a contact, every
+    /// direction of an enclosed vertex ([`shadow_core::contact`]).
+    blocked: wgpu::Buffer,
+    /// Per vertex (vec4, w unused), the direction a vertex at a contact is
+    /// moved off the other surface before its tests, as far as along its
+    /// own normal: the sum of the contact planes' front normals.
+    push: wgpu::Buffer,
     /// 32-bit words of visibility per vertex.
     words: u32,
 }
@@ -132,11 +166,17 @@ pub struct Visibility {
     shared: Shared,
     maps: DepthMaps,
     test: Test,
-    /// The current list of tested vertices, directions' lights and offset,
-    /// as last written.
+    /// The current list of tested vertices (sorted by region), the ranges
+    /// of it in each region, the directions' lights, the regions, the
+    /// offset and each vertex's region, as last written.
     listed: Vec<u32>,
+    listed_regions: Vec<Range<usize>>,
     lights: Vec<Vec4>,
+    regions: usize,
     test_offset: TestOffset,
+    vertex_regions: Vec<u32>,
+    /// Whether the blocked bits last written hold any set bit.
+    any_blocked: bool,
 }
 
 impl Visibility {
@@ -164,25 +204,26 @@ impl Visibility {
                 grid: 1,
             },
         };
+        let words = directions.div_ceil(32) as u32;
+        let bits = 4 * words as u64 * geometry.vertices as u64;
+        let views = (MAX_REGIONS * directions * size_of::<GpuDirection>()) as u64;
+        let largest = bits.max(views);
         let needs = wgpu::Limits {
             max_texture_dimension_2d: atlas.side(),
-            max_storage_buffers_per_shader_stage: 4,
+            // shade.wgsl binds 8 storage buffers in its compute stage.
+            max_storage_buffers_per_shader_stage: 8,
+            max_storage_buffer_binding_size: largest,
+            max_buffer_size: largest,
             max_compute_workgroup_size_x: 64,
             max_compute_invocations_per_workgroup: 64,
             max_compute_workgroups_per_dimension: (geometry.vertices.div_ceil(64) as u32).max(1),
             ..wgpu::Limits::downlevel_webgl2_defaults()
         };
         ctx.require("occlusion-query", wgpu::Features::empty(), &needs)?;
-        let words = directions.div_ceil(32) as u32;
         let copy_dst = wgpu::BufferUsages::COPY_DST;
         let storage = wgpu::BufferUsages::STORAGE;
         let shared = Shared {
-            directions: blank(
-                ctx,
-                "directions",
-                (directions * size_of::<GpuDirection>()) as u64,
-                storage | copy_dst,
-            ),
+            directions: blank(ctx, "directions", views, storage | copy_dst),
             offset: blank(ctx, "offset", 16, wgpu::BufferUsages::UNIFORM | copy_dst),
             list: blank(
                 ctx,
@@ -193,8 +234,15 @@ impl Visibility {
             bits: blank(
                 ctx,
                 "visibility bits",
-                4 * words as u64 * geometry.vertices as u64,
+                bits,
                 storage | wgpu::BufferUsages::COPY_SRC | copy_dst,
+            ),
+            blocked: blank(ctx, "blocked bits", bits, storage | copy_dst),
+            push: blank(
+                ctx,
+                "contact push",
+                16 * geometry.vertices as u64,
+                storage | wgpu::BufferUsages::VERTEX | copy_dst,
             ),
             words,
         };
@@ -205,7 +253,7 @@ impl Visibility {
                 &maps,
                 &shared,
                 geometry,
-                directions.div_ceil(atlas.batch()),
+                directions.div_ceil((atlas.batch() / MAX_REGIONS).max(1)),
             )),
             VertexTest::OcclusionQuery => {
                 Test::Queries(QueryTest::new(ctx, &maps, &shared, geometry, directions))
@@ -216,12 +264,18 @@ impl Visibility {
             maps,
             test,
             listed: Vec::new(),
+            listed_regions: Vec::new(),
             lights: Vec::new(),
+            regions: 1,
             test_offset: TestOffset::default(),
+            vertex_regions: Vec::new(),
+            any_blocked: false,
         })
     }
 
-    /// Every direction's view and light (`GpuDirection` in the shaders).
+    /// Every region's views of every direction and their lights
+    /// (`GpuDirection` in the shaders), region by region: the first region's
+    /// are the directions' own.
     pub fn directions(&self) -> &wgpu::Buffer {
         &self.shared.directions
     }
@@ -237,31 +291,74 @@ impl Visibility {
         &self.shared.bits
     }
 
-    /// Sets where the maps look from (every direction) and how far tested
-    /// vertices move.
-    pub fn set_view(&mut self, ctx: &GpuContext, directions: &[GpuDirection], offset: TestOffset) {
+    /// Sets where the maps look from (`views`: every region's view of every
+    /// direction, [`crate::views::views`]), how far tested vertices move,
+    /// and each vertex's region (also written as its normal's w).
+    pub fn set_view(
+        &mut self,
+        ctx: &GpuContext,
+        views: &[GpuDirection],
+        offset: TestOffset,
+        vertex_regions: Vec<u32>,
+    ) {
         ctx.queue
-            .write_buffer(&self.shared.directions, 0, bytemuck::cast_slice(directions));
+            .write_buffer(&self.shared.directions, 0, bytemuck::cast_slice(views));
         ctx.queue
             .write_buffer(&self.shared.offset, 0, bytemuck::bytes_of(&offset));
-        self.lights = directions.iter().map(|d| d.light).collect();
+        let stride = offset.stride as usize;
+        self.regions = views.len() / stride.max(1);
+        self.lights = views[..stride].iter().map(|d| d.light).collect();
         self.test_offset = offset;
+        self.vertex_regions = vertex_regions;
+    }
+
+    /// Sets what contacts with other objects do to the tests
+    /// ([`shadow_core::contact`]): the bits they clear whatever the maps say
+    /// (`words` per vertex, as [`Visibility::bits`]), and per vertex the
+    /// direction it is moved off the other surfaces (so that the surface it
+    /// lies on, edge-on in the maps, does not shadow the half it does not
+    /// block). Empty slices: no contacts.
+    pub fn set_contacts(&mut self, ctx: &GpuContext, blocked: &[u32], push: &[Vec4]) {
+        let any = !blocked.is_empty();
+        if any {
+            ctx.queue
+                .write_buffer(&self.shared.blocked, 0, bytemuck::cast_slice(blocked));
+            ctx.queue
+                .write_buffer(&self.shared.push, 0, bytemuck::cast_slice(push));
+        } else if self.any_blocked {
+            let zeros = vec![0u8; self.shared.blocked.size() as usize];
+            ctx.queue.write_buffer(&self.shared.blocked, 0, &zeros);
+            let zeros = vec![0u8; self.shared.push.size() as usize];
+            ctx.queue.write_buffer(&self.shared.push, 0, &zeros);
+        }
+        self.any_blocked = any;
     }
 
     /// Sets which vertices the next tests test (written before the next
-    /// submission: one list per submission).
+    /// submission: one list per submission), sorted by region.
     pub fn set_list(&mut self, ctx: &GpuContext, list: &[u32]) {
-        if !list.is_empty() {
+        let mut sorted = list.to_vec();
+        sorted.sort_by_key(|&v| self.vertex_regions[v as usize]);
+        self.listed_regions = (0..self.regions as u32)
+            .map(|r| {
+                let of = |v: &u32| self.vertex_regions[*v as usize];
+                sorted.partition_point(|v| of(v) < r)..sorted.partition_point(|v| of(v) <= r)
+            })
+            .collect();
+        if !sorted.is_empty() {
             ctx.queue
-                .write_buffer(&self.shared.list, 0, bytemuck::cast_slice(list));
+                .write_buffer(&self.shared.list, 0, bytemuck::cast_slice(&sorted));
         }
-        self.listed = list.to_vec();
+        self.listed = sorted;
     }
 
-    /// The batches of directions `directions` falls into: each a range of
-    /// at most one atlas of maps.
+    /// The batches of directions `directions` falls into: each a range whose
+    /// maps of every region fit one atlas.
     pub fn batches(&self, directions: Range<usize>) -> Vec<Range<usize>> {
-        let step = self.maps.atlas().batch();
+        let step = match self.test {
+            Test::Compare(_) => (self.maps.atlas().batch() / self.regions).max(1),
+            Test::Queries(_) => 1,
+        };
         directions
             .clone()
             .step_by(step)
@@ -269,17 +366,29 @@ impl Visibility {
             .collect()
     }
 
-    /// Records the depth maps of the directions of `batch` into the atlas:
-    /// one render pass, one indexed draw of every occluder per map.
+    /// Records the depth maps of every region for the directions of `batch`
+    /// into the atlas: one render pass, one indexed draw of every occluder
+    /// per map. The paper's queries draw their maps with the tests
+    /// ([`Visibility::record_tests`]), one at a time.
     pub fn record_maps(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         geometry: &Geometry,
         batch: Range<usize>,
     ) -> Counts {
-        self.maps.record(encoder, geometry, batch.clone());
+        if let Test::Queries(_) = self.test {
+            return Counts::default();
+        }
+        let (count, stride) = (batch.len(), self.test_offset.stride);
+        let views = (0..self.regions).flat_map(|r| {
+            let batch = batch.clone();
+            batch
+                .enumerate()
+                .map(move |(i, j)| (r * count + i, r as u32 * stride + j as u32))
+        });
+        self.maps.record(encoder, geometry, views);
         Counts {
-            maps: batch.len() as u64,
+            maps: (self.regions * count) as u64,
             tests: 0,
         }
     }
@@ -296,7 +405,7 @@ impl Visibility {
         index: usize,
     ) -> Result<Counts> {
         let vertices = self.listed.len();
-        let counts = Counts {
+        let mut counts = Counts {
             maps: 0,
             tests: (vertices * batch.len()) as u64,
         };
@@ -315,7 +424,17 @@ impl Visibility {
             Test::Queries(test) => {
                 if vertices > 0 {
                     let directions = batch.map(|j| (j, self.lights[j]));
-                    test.record(ctx, encoder, &self.maps, geometry, &self.listed, directions);
+                    counts.maps = test.record(
+                        ctx,
+                        encoder,
+                        &self.maps,
+                        geometry,
+                        &self.listed,
+                        &self.listed_regions,
+                        self.test_offset.stride,
+                        &self.shared.push,
+                        directions,
+                    );
                 }
             }
         }

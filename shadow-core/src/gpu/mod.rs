@@ -478,5 +478,25 @@ pub fn test_context() -> Arc<GpuContext> {
     }
 }
 
+/// A context of its own on the test adapter, its device created with the
+/// adapter's limits lowered by `lower`: what a host renderer's device at low
+/// limits gives a method. Created after [`test_context`], so that a missing
+/// adapter fails as there; wgpu's default handler panics on any error
+/// raised outside a capture on this device.
+pub fn limited_test_context(lower: impl FnOnce(&mut wgpu::Limits)) -> Arc<GpuContext> {
+    let _shared = test_context();
+    let instance = wgpu::Instance::new(instance_descriptor());
+    let adapter = pollster::block_on(instance.request_adapter(&Default::default()))
+        .expect("the adapter test_context found");
+    let mut limits = wgpu::Limits::default().or_worse_values_from(&adapter.limits());
+    lower(&mut limits);
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("a device with lower limits");
+    Arc::new(GpuContext::from_device(device, queue))
+}
+
 #[cfg(test)]
 mod tests;
