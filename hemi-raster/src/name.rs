@@ -28,12 +28,14 @@ pub const OPTIONS: &[&str] = &[
     "table=N",
     "order=N",
     "paper",
+    "blocks",
     "direct",
     "window=none|hanning|lanczos",
     "reach=N",
     "min=N",
     "coarse=N",
     "rings=1|2",
+    "chords=replace|keep",
     "cull=auto|on|off",
     "simd=auto|portable|avx2|avx512",
 ];
@@ -48,17 +50,25 @@ impl Config {
     ///   `reach=` says otherwise;
     /// * `mask=16|32|64`, `table=N` (plane-table cells per cube-face side),
     ///   `order=N` (SH order), `window=none|hanning|lanczos`;
-    /// * `paper` (SH from 4×4 blocks, [`Config::paper`]), `direct` (no SH);
+    /// * `paper`: [`Config::paper`] as the base the other options change;
+    /// * `blocks` (SH from 4×4 blocks), `direct` (no SH);
     /// * the hierarchy's `reach=N` (near reach in coarse-triangle radii),
     ///   `min=N` (least coarse triangle count), `coarse=N` (the
-    ///   simplification's divisor), `rings=1|2`;
+    ///   simplification's divisor), `rings=1|2`, `chords=replace|keep`
+    ///   (coarse triangles too close to a receiver replaced by their fine
+    ///   ones, or kept as the paper keeps them);
     /// * `cull=auto|on|off` (back faces), `simd=auto|portable|avx2|avx512`.
     ///
     /// Fails with [`shadow_core::Error::InvalidConfig`] naming the option
     /// (and the closest valid one for a typo) or the setting out of range.
     pub fn from_name(text: &str) -> Result<Config> {
         let name = MethodName::parse(text, NAME)?;
-        let mut config = Config::default();
+        let paper = name.options().any(|o| (o.key, o.value) == ("paper", None));
+        let mut config = if paper {
+            Config::paper()
+        } else {
+            Config::default()
+        };
         // The switches that choose a base go first, so that the options
         // compose in any order.
         for option in name.options() {
@@ -73,7 +83,7 @@ impl Config {
                 _ => {}
             }
         }
-        if config.pvs != Pvs::Off {
+        if config.pvs != Pvs::Off && !paper {
             config.hierarchy = config.hierarchy.with_near_reach(Hierarchy::WIDE_NEAR_REACH);
         }
         for option in name.options() {
@@ -86,6 +96,17 @@ impl Config {
     /// The name [`Config::from_name`] reads back to these settings.
     pub fn name(&self) -> String {
         let mut name = NameWriter::new(NAME);
+        // The paper's base: its integration and a hierarchy that keeps
+        // every coarse triangle.
+        let paper = self.integration == Integration::ShBlocks
+            && matches!(
+                self.hierarchy,
+                Hierarchy::TwoLevel {
+                    replace_near_chords: false,
+                    ..
+                }
+            );
+        name.switch("paper", paper);
         name.switch("flat", self.hierarchy == Hierarchy::Flat);
         match self.pvs {
             Pvs::Off => {}
@@ -96,7 +117,11 @@ impl Config {
                 name.value("pvs", stride);
             }
         }
-        let default = Config::default();
+        let default = if paper {
+            Config::paper()
+        } else {
+            Config::default()
+        };
         name.changed(
             "mask",
             self.mask_resolution.pixels_per_side(),
@@ -104,12 +129,15 @@ impl Config {
         )
         .changed("table", self.lut_resolution, default.lut_resolution)
         .changed("order", self.order.get(), default.order.get())
-        .switch("paper", self.integration == Integration::ShBlocks)
+        .switch(
+            "blocks",
+            !paper && self.integration == Integration::ShBlocks,
+        )
         .switch("direct", self.integration == Integration::Direct)
         .changed("window", self.window.name(), default.window.name());
         let base = match self.pvs {
-            Pvs::Off => default.hierarchy,
-            Pvs::Animation { .. } => Config::fast().hierarchy,
+            Pvs::Animation { .. } if !paper => Config::fast().hierarchy,
+            _ => default.hierarchy,
         };
         if let (
             Hierarchy::TwoLevel {
@@ -117,19 +145,22 @@ impl Config {
                 min_coarse_triangles,
                 near,
                 near_reach,
+                replace_near_chords,
             },
             Hierarchy::TwoLevel {
                 coarse_divisor: d,
                 min_coarse_triangles: m,
                 near: n,
                 near_reach: r,
+                replace_near_chords: c,
             },
         ) = (self.hierarchy, base)
         {
             name.changed("reach", near_reach, r)
                 .changed("min", min_coarse_triangles, m)
                 .changed("coarse", coarse_divisor, d)
-                .changed("rings", rings(near), rings(n));
+                .changed("rings", rings(near), rings(n))
+                .changed("chords", chords(replace_near_chords), chords(c));
         }
         name.changed(
             "cull",
@@ -146,7 +177,7 @@ impl Config {
 fn read(name: &MethodName, option: Opt, config: &mut Config) -> Result<()> {
     let bad = |what: &str| Err(name.error(format!("{option}: {what}")));
     match (option.key, option.value) {
-        ("flat" | "pvs", _) => {}
+        ("flat" | "pvs" | "paper", _) => {}
         ("mask", Some(n)) => {
             config.mask_resolution = match name.value(option, n)? {
                 16 => MaskResolution::R16,
@@ -165,7 +196,7 @@ fn read(name: &MethodName, option: Opt, config: &mut Config) -> Result<()> {
                 )));
             }
         },
-        ("paper", None) => config.integration = Integration::ShBlocks,
+        ("blocks", None) => config.integration = Integration::ShBlocks,
         ("direct", None) => config.integration = Integration::Direct,
         ("window", Some(w)) => match Window::from_name(w) {
             Some(window) => config.window = window,
@@ -179,6 +210,13 @@ fn read(name: &MethodName, option: Opt, config: &mut Config) -> Result<()> {
                 "1" => NearRings::One,
                 "2" => NearRings::Two,
                 _ => return bad("the near field is 1 or 2 rings"),
+            }
+        }
+        ("chords", Some(c)) => {
+            *two_level(name, option, config)?.4 = match c {
+                "replace" => true,
+                "keep" => false,
+                _ => return bad("near chords are replaced or kept"),
             }
         }
         ("cull", Some(c)) => {
@@ -209,6 +247,7 @@ type TwoLevel<'c> = (
     &'c mut u32,
     &'c mut NearRings,
     &'c mut u8,
+    &'c mut bool,
 );
 
 fn two_level<'c>(name: &MethodName, option: Opt, config: &'c mut Config) -> Result<TwoLevel<'c>> {
@@ -218,11 +257,22 @@ fn two_level<'c>(name: &MethodName, option: Opt, config: &'c mut Config) -> Resu
             min_coarse_triangles,
             near,
             near_reach,
-        } => Ok((coarse_divisor, min_coarse_triangles, near, near_reach)),
+            replace_near_chords,
+        } => Ok((
+            coarse_divisor,
+            min_coarse_triangles,
+            near,
+            near_reach,
+            replace_near_chords,
+        )),
         Hierarchy::Flat => Err(name.error(format!(
             "{option}: a setting of the hierarchy, which flat turns off"
         ))),
     }
+}
+
+fn chords(replace: bool) -> &'static str {
+    if replace { "replace" } else { "keep" }
 }
 
 fn rings(near: NearRings) -> u8 {
@@ -311,14 +361,20 @@ mod tests {
     fn config() -> impl Strategy<Value = Config> {
         let hierarchy = prop_oneof![
             Just(Hierarchy::Flat),
-            (1_u32..20, 0_u32..500, any::<bool>(), 0_u8..10).prop_map(|(d, m, one, r)| {
-                Hierarchy::TwoLevel {
+            (
+                1_u32..20,
+                0_u32..500,
+                any::<bool>(),
+                0_u8..10,
+                any::<bool>()
+            )
+                .prop_map(|(d, m, one, r, replace)| Hierarchy::TwoLevel {
                     coarse_divisor: NonZeroU32::new(d).unwrap(),
                     min_coarse_triangles: m,
                     near: if one { NearRings::One } else { NearRings::Two },
                     near_reach: r,
-                }
-            }),
+                    replace_near_chords: replace,
+                }),
         ];
         (
             prop::sample::select(vec![

@@ -273,6 +273,48 @@ mod tests {
         }
     }
 
+    fn cube(centre: Vec3, half: f32) -> Vec<Vec4> {
+        [-1.0, 1.0]
+            .into_iter()
+            .flat_map(|x| [-1.0, 1.0].map(move |y| (x, y)))
+            .flat_map(|(x, y)| [-1.0, 1.0].map(move |z| Vec3::new(x, y, z)))
+            .map(|c| (centre + c * half).extend(1.0))
+            .collect()
+    }
+
+    /// Objects of like size share one region (chess pieces on their board);
+    /// a small object on a floor 200 times its size gets its own, and the
+    /// regions do not change when the scene moves or grows.
+    #[test]
+    fn regions_keep_every_object_at_its_own_scale() {
+        let board = cube(Vec3::ZERO, 0.2);
+        let pieces: Vec<Vec<Vec4>> = (0..8)
+            .map(|i| cube(Vec3::new(-0.15 + 0.04 * i as f32, 0.22, 0.1), 0.02))
+            .collect();
+        let mut objects: Vec<&[Vec4]> = vec![&board];
+        objects.extend(pieces.iter().map(|p| p.as_slice()));
+        let chess = Regions::new(&objects);
+        assert_eq!(chess.spheres.len(), 1);
+        assert!(chess.of_object.iter().all(|&r| r == 0));
+        let floor = cube(Vec3::ZERO, 100.0);
+        let model = cube(Vec3::new(0.0, 100.5, 0.0), 0.5);
+        let scene = Regions::new(&[&floor, &model]);
+        assert_eq!(scene.spheres.len(), 2);
+        assert_ne!(scene.of_object[0], scene.of_object[1]);
+        let model_sphere = scene.spheres[scene.of_object[1] as usize];
+        assert!(model_sphere.1 < 1.0, "{model_sphere:?}");
+        // Moved 10 km and scaled by 10⁷: the same grouping.
+        let moved = |p: &[Vec4], by: Vec3, scale: f32| -> Vec<Vec4> {
+            p.iter()
+                .map(|v| (v.truncate() * scale + by).extend(1.0))
+                .collect()
+        };
+        for (by, scale) in [(Vec3::new(6e3, 0.0, -8e3), 1.0), (Vec3::ZERO, 1e7)] {
+            let (f, m) = (moved(&floor, by, scale), moved(&model, by, scale));
+            assert_eq!(Regions::new(&[&f, &m]).of_object, scene.of_object);
+        }
+    }
+
     #[test]
     fn atlases_hold_a_batch_and_place_maps_row_by_row() {
         let a = Atlas::new(256, 258, 16384);

@@ -83,6 +83,7 @@ impl Bounds {
             breakdown: None,
             radiance: RadianceError::over_frames(&errors),
             frame_ms: None,
+            blockers: None,
         })
     }
 
@@ -107,6 +108,7 @@ impl Bounds {
             breakdown: None,
             radiance: RadianceError::over_frames(&errors),
             frame_ms: None,
+            blockers: None,
         }
     }
 }

@@ -5,7 +5,7 @@ use std::{fmt::Write, path::Path};
 use serde::Serialize;
 use shadow_core::Result;
 
-use super::{ErrorBreakdown, RadianceError, TransferError, WORST_FRACTION};
+use super::{CUT_OFFS, ErrorBreakdown, RadianceError, TransferError, WORST_FRACTION};
 use crate::{
     chart::{Axes, Point, speed_vs_error},
     io::{write_atomic, write_json_atomic},
@@ -36,6 +36,9 @@ pub struct Row {
     /// Median over frames of the update + shade time, milliseconds; `None`
     /// for the bounds, which are not methods.
     pub frame_ms: Option<f64>,
+    /// The mean number of blockers a receiver rasterizes (Table 1's "Avg.
+    /// #Tris"), where the method counts them.
+    pub blockers: Option<f64>,
 }
 
 /// How the transfer reference of a scene was made.
@@ -171,21 +174,40 @@ impl SceneAccuracy {
         );
         let _ = writeln!(
             s,
-            "| configuration | transfer error (per vertex) | transfer error (global) | radiance error | p99 | ms/frame |"
+            "| configuration | transfer error (per vertex) | transfer error (global) | radiance error | p99 | ms/frame | blockers per receiver |"
         );
-        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|");
+        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
         let percent = |x: f32| format!("{:.2}%", x * 100.0);
         for row in &self.rows {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.1}% | {} |",
+                "| {} | {} | {} | {} | {:.1}% | {} | {} |",
                 row.name,
                 row.transfer.map_or("—".into(), |e| percent(e.per_vertex)),
                 row.transfer.map_or("—".into(), |e| percent(e.global)),
                 percent(row.radiance.relative_l2),
                 row.radiance.p99 * 100.0,
                 row.frame_ms.map_or("—".into(), |ms| format!("{ms:.1}")),
+                row.blockers.map_or("—".into(), |b| format!("{b:.0}")),
             );
+        }
+        let _ = writeln!(
+            s,
+            "\nThe per-vertex transfer error with the dark vertices cut off at other \
+             fractions of an unoccluded vertex's |T_ref| ({}):\n",
+            CUT_OFFS.map(|c| format!("{:.0}%", c * 100.0)).join(", ")
+        );
+        let _ = writeln!(
+            s,
+            "| configuration | {} |",
+            CUT_OFFS.map(|c| format!("{:.0}%", c * 100.0)).join(" | ")
+        );
+        let _ = writeln!(s, "|---|{}", "---:|".repeat(CUT_OFFS.len()));
+        for row in &self.rows {
+            if let Some(e) = row.transfer {
+                let cells: Vec<String> = e.by_cut_off.iter().map(|&x| percent(x)).collect();
+                let _ = writeln!(s, "| {} | {} |", row.name, cells.join(" | "));
+            }
         }
         let _ = writeln!(s);
         for row in &self.rows {

@@ -78,6 +78,8 @@ impl<W: MaskRow> Pipeline<W> {
     /// calling thread with the loop's phases timed. A receiver that
     /// `enclosed` marks (pressed on another object or buried in one,
     /// [`shadow_core::contact`]) sees nothing: its mask is the whole disk.
+    /// Returns the mean number of candidate blockers per receiver (Table
+    /// 1's "Avg. #Tris", before the frame's replacements of near chords).
     pub(crate) fn rasterize(
         &mut self,
         blockers: &Blockers,
@@ -85,7 +87,7 @@ impl<W: MaskRow> Pipeline<W> {
         hierarchy: Option<&TwoLevel>,
         visible: Option<&VisibleSets>,
         profile: Option<&mut UpdateProfile>,
-    ) {
+    ) -> f64 {
         let coarse = hierarchy.map(|h| h.coarse_level(blockers));
         let layout = Layout::new(blockers, coarse.as_ref());
         // Visible sets list every triangle they read: no whole clusters.
@@ -108,6 +110,12 @@ impl<W: MaskRow> Pipeline<W> {
             receiver_mask(simd, lut, &frame, &candidates(v), &columns, scratch)
         };
         let receivers = 0..blockers.vertex_count();
+        let candidates_per_receiver = receivers
+            .clone()
+            .into_par_iter()
+            .map(|v| candidates(v).count() as f64)
+            .sum::<f64>()
+            / receivers.len().max(1) as f64;
         self.masks = match profile {
             None => receivers
                 .into_par_iter()
@@ -131,6 +139,7 @@ impl<W: MaskRow> Pipeline<W> {
                 masks
             }
         };
+        candidates_per_receiver
     }
 
     pub(crate) fn transfer(&self, blockers: &Blockers, blocks: bool, out: &mut Vec<f32>) {

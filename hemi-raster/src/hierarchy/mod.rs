@@ -135,7 +135,9 @@ impl TwoLevel {
     /// Simplifies every object to max(triangles / `divisor`,
     /// `min_triangles`) triangles and gathers the per-vertex lists in the
     /// scene's first frame, the reference pose; `cull` says per object
-    /// whether its back faces are culled.
+    /// whether its back faces are culled, `replace` whether coarse
+    /// triangles too close to a receiver are replaced
+    /// ([`Hierarchy::TwoLevel`](crate::Hierarchy::TwoLevel)).
     pub(crate) fn new(
         scene: &Scene,
         cull: &[bool],
@@ -143,6 +145,7 @@ impl TwoLevel {
         min_triangles: u32,
         rings: NearRings,
         reach: u8,
+        replace: bool,
     ) -> Result<TwoLevel> {
         let reference = scene.frame_geometry(0)?;
         let parts = scene
@@ -230,8 +233,10 @@ impl TwoLevel {
         let mut excluded = Csr::default();
         let mut vertex_group = Vec::new();
         for (o, part) in parts.iter().enumerate() {
-            // Objects used whole list nothing and drop nothing.
+            // Objects used whole list nothing and drop nothing; without
+            // replacement nothing is dropped either.
             let (body, group): (Vec<usize>, u32) = match part.coarse {
+                Some(_) if !replace => (vec![o], NO_GROUP),
                 Some(_) => (
                     (0..parts.len())
                         .filter(|&q| bodies[q] == bodies[o])
@@ -272,7 +277,9 @@ impl TwoLevel {
                     skip.dedup();
                     skip.retain(|&s| {
                         let region = &regions[s as usize];
-                        !region.is_empty() && region.iter().all(|e| list.binary_search(e).is_ok())
+                        replace
+                            && !region.is_empty()
+                            && region.iter().all(|e| list.binary_search(e).is_ok())
                     });
                     (list, skip)
                 })

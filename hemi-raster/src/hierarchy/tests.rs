@@ -36,6 +36,7 @@ fn two_level(near: NearRings, near_reach: u8) -> Config {
             min_coarse_triangles: 100,
             near,
             near_reach,
+            replace_near_chords: true,
         },
         ..Config::default()
     }

@@ -198,7 +198,7 @@ impl HemiRaster {
         let blockers = Blockers::new(frame, &prepared.cull)?;
         let enclosed = enclosed(frame, &prepared.cull)?;
         let (hierarchy, visible) = (prepared.hierarchy.as_ref(), prepared.visible.as_ref());
-        with_pipeline!(engine, p => p.rasterize(&blockers, &enclosed, hierarchy, visible, profile.as_deref_mut()));
+        let candidates = with_pipeline!(engine, p => p.rasterize(&blockers, &enclosed, hierarchy, visible, profile.as_deref_mut()));
         let visibility = start.elapsed();
         match self.config.integration {
             Integration::ShBlocks | Integration::ShPixels => {
@@ -216,6 +216,11 @@ impl HemiRaster {
             .seconds(Stage::Update, "visibility", visibility.as_secs_f64());
         self.profile
             .seconds(Stage::Update, "integration", integration.as_secs_f64());
+        self.profile.count(
+            Stage::Update,
+            "blockers per receiver",
+            candidates.round() as u64,
+        );
         if let Some(p) = profile {
             p.integration = integration;
             // Gathering the frame's blockers and corner arrays, the rest.
@@ -288,6 +293,7 @@ impl ShadowMethod for HemiRaster {
                 min_coarse_triangles,
                 near,
                 near_reach,
+                replace_near_chords,
             } => Some(TwoLevel::new(
                 scene,
                 &cull,
@@ -295,6 +301,7 @@ impl ShadowMethod for HemiRaster {
                 min_coarse_triangles,
                 near,
                 near_reach,
+                replace_near_chords,
             )?),
         };
         let visible = match self.config.pvs {
