@@ -8,8 +8,8 @@ use shadow_core::{Error, Result, sh::Window};
 /// their own self-shadowing.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Grouping {
-    /// Objects whose bounding boxes (padded by a thousandth of the scene's
-    /// diagonal, so that flat objects have a volume) overlap by more than
+    /// Objects whose bounding boxes (padded by a thousandth of the smaller
+    /// one's diagonal, so that flat objects have a volume) overlap by more than
     /// `overlap` of the smaller box's volume form one group: the two colours
     /// of a chess board, or parts of one figure, but not a piece standing
     /// on the board. The groups follow the objects: each frame whose poses

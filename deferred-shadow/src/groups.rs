@@ -27,6 +27,23 @@ pub(crate) fn posed_bounds(model: Aabb, t: &Affine3A) -> Aabb {
     }))
 }
 
+/// Of the padding that gives a flat box a volume: this share of the
+/// smaller box's diagonal.
+const PAD: f32 = 1e-3;
+
+/// Whether boxes `a` and `b`, each padded by [`PAD`] of the smaller one's
+/// diagonal, share more than `overlap` of the smaller padded volume. The
+/// pad follows the pair, not the scene: a 1 m model on a 200 m floor
+/// stays apart from it as it does on a 3 m one. Extents are differences
+/// of the boxes' own corners, so the test reads the same wherever the
+/// pair sits.
+fn overlaps(a: &Aabb, b: &Aabb, overlap: f32) -> bool {
+    let pad = 2.0 * PAD * a.diagonal().min(b.diagonal());
+    let volume = |e: Vec3| (e + pad).max(Vec3::ZERO).element_product();
+    let common = volume(a.max.min(b.max) - a.min.max(b.min));
+    common > overlap * volume(a.max - a.min).min(volume(b.max - b.min))
+}
+
 impl Groups {
     /// The groups [`crate::DeferredShadow`] forms when it prepares `scene`:
     /// [`Groups::of_frame`] at the first frame.
@@ -76,24 +93,9 @@ impl Groups {
         }
         match grouping {
             Grouping::Overlapping { overlap } => {
-                let scene = boxes.iter().copied().fold(Aabb::EMPTY, Aabb::union);
-                let pad = 1e-3 * scene.diagonal();
-                let padded: Vec<Aabb> = boxes
-                    .iter()
-                    .map(|b| Aabb {
-                        min: b.min - pad,
-                        max: b.max + pad,
-                    })
-                    .collect();
-                let volume = |b: &Aabb| (b.max - b.min).max(glam::Vec3::ZERO).element_product();
                 for a in 0..n {
                     for b in a + 1..n {
-                        let common = Aabb {
-                            min: padded[a].min.max(padded[b].min),
-                            max: padded[a].max.min(padded[b].max),
-                        };
-                        let smaller = volume(&padded[a]).min(volume(&padded[b]));
-                        if volume(&common) > overlap * smaller {
+                        if overlaps(&boxes[a], &boxes[b], *overlap) {
                             let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
                             parent[ra.max(rb)] = ra.min(rb);
                         }
@@ -173,6 +175,39 @@ mod tests {
         .unwrap();
         assert_eq!(groups.members, vec![vec![0, 2], vec![1], vec![3]]);
         assert_eq!(groups.of_object, vec![0, 1, 0, 2]);
+    }
+
+    /// The pad follows each pair: a 1 m model on a floor stays apart from
+    /// it whether the floor is 3 m or 200 m across (padded by a thousandth
+    /// of the scene's diagonal, the model on the 200 m floor shared 36% of
+    /// its box with the floor's and the 1 cm cubes merged), two 1 cm cubes
+    /// 5 cm apart stay apart beside it, and none of it changes 10 km away.
+    #[test]
+    fn groups_do_not_depend_on_the_scene_around_the_pair() {
+        let grouping = Grouping::Overlapping { overlap: 0.2 };
+        let model = boxed([-0.5, 0.0, -0.5], [0.5, 1.0, 0.5]);
+        let cubes = [
+            boxed([2.0, 0.0, 0.0], [2.01, 0.01, 0.01]),
+            boxed([2.06, 0.0, 0.0], [2.07, 0.01, 0.01]),
+        ];
+        for half in [1.5, 100.0] {
+            let floor = boxed([-half, 0.0, -half], [half, 0.0, half]);
+            for shift in [Vec3::ZERO, Vec3::new(6000.0, 0.0, -8000.0)] {
+                let moved: Vec<Aabb> = [floor, model, cubes[0], cubes[1]]
+                    .iter()
+                    .map(|b| Aabb {
+                        min: b.min + shift,
+                        max: b.max + shift,
+                    })
+                    .collect();
+                let groups = Groups::new(&grouping, &moved).unwrap();
+                assert_eq!(
+                    groups.members,
+                    vec![vec![0], vec![1], vec![2], vec![3]],
+                    "floor {half} m, shifted {shift}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -56,7 +56,7 @@ impl Config {
     ///   `min=N` (least coarse triangle count), `coarse=N` (the
     ///   simplification's divisor), `rings=1|2`, `chords=replace|keep`
     ///   (coarse triangles too close to a receiver replaced by their fine
-    ///   ones, or kept as the paper keeps them);
+    ///   ones, or kept however close);
     /// * `cull=auto|on|off` (back faces), `simd=auto|portable|avx2|avx512`.
     ///
     /// Fails with [`shadow_core::Error::InvalidConfig`] naming the option
@@ -93,19 +93,27 @@ impl Config {
         Ok(config)
     }
 
-    /// The name [`Config::from_name`] reads back to these settings.
+    /// The name [`Config::from_name`] reads back to these settings: the
+    /// shorter of the names on [`Config::default`] and, where the
+    /// integration is the paper's, on [`Config::paper`].
     pub fn name(&self) -> String {
+        let plain = self.name_on(false);
+        if self.integration != Integration::ShBlocks {
+            return plain;
+        }
+        let paper = self.name_on(true);
+        if paper.len() < plain.len() {
+            paper
+        } else {
+            plain
+        }
+    }
+
+    /// The name of these settings as changes to [`Config::paper`]
+    /// (`paper`, whose integration must be this one's) or to
+    /// [`Config::default`].
+    fn name_on(&self, paper: bool) -> String {
         let mut name = NameWriter::new(NAME);
-        // The paper's base: its integration and a hierarchy that keeps
-        // every coarse triangle.
-        let paper = self.integration == Integration::ShBlocks
-            && matches!(
-                self.hierarchy,
-                Hierarchy::TwoLevel {
-                    replace_near_chords: false,
-                    ..
-                }
-            );
         name.switch("paper", paper);
         name.switch("flat", self.hierarchy == Hierarchy::Flat);
         match self.pvs {

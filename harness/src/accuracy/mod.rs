@@ -105,7 +105,7 @@ const VARIANTS: &[(&str, &str)] = &[
     ),
     (
         "hemi-raster:paper",
-        "the paper as published (Config::paper): 4×4 blocks, a tenth of the triangles however few, the one-ring, every coarse triangle kept",
+        "the paper as published (Config::paper): 4×4 blocks, a tenth of the triangles however few, the one-ring",
     ),
     (
         "hemi-raster:direct",

@@ -218,7 +218,7 @@ impl Methods {
                 ),
                 Family::new(
                     "hemi-raster",
-                    "Kautz et al. 2004: CPU hemispherical rasterization to SH transfer (32×32 masks, order 5, two-level mesh hierarchy); pvs: per-vertex visible sets from the scene's own frames (§3.2), flat: no hierarchy, paper: SH from 4×4 blocks as published",
+                    "Kautz et al. 2004: CPU hemispherical rasterization to SH transfer (32×32 masks, order 5, two-level mesh hierarchy); pvs: per-vertex visible sets from the scene's own frames (§3.2), flat: no hierarchy, paper: as published (SH from 4×4 blocks, a tenth of the triangles, the one-ring)",
                     hemi_raster::name::OPTIONS,
                     |text| {
                         let config = hemi_raster::Config::from_name(text)?;

@@ -139,13 +139,8 @@ fn bumpy_sphere_stays_close_to_flat_mode() {
     }
 }
 
-/// An open wavy sheet: no back-face culling hides the coarse chords over
-/// its valleys, the envelope and chord tests must. Measured: mean
-/// blocked 0.1789 against 0.1781 flat, mean |difference| 0.0022 (chord
-/// test alone: 0.1855 and 0.0085; without either test, before the
-/// receivers were lifted, 0.48 and 0.31).
-#[test]
-fn open_wavy_sheet_stays_close_to_flat_mode() {
+/// An open sheet with waves in two directions, 28 quads a side.
+fn wavy_sheet() -> Scene {
     let flat_sheet = grid(0.0, 0.5, 28);
     let positions = flat_sheet
         .positions()
@@ -156,7 +151,17 @@ fn open_wavy_sheet_stays_close_to_flat_mode() {
         })
         .collect();
     let sheet = Mesh::new("wavy", positions, None, flat_sheet.triangles().to_vec()).unwrap();
-    let scene = Scene::still("wavy", vec![object(sheet)], camera()).unwrap();
+    Scene::still("wavy", vec![object(sheet)], camera()).unwrap()
+}
+
+/// An open wavy sheet: no back-face culling hides the coarse chords over
+/// its valleys, the envelope and chord tests must. Measured: mean
+/// blocked 0.1778 against 0.1769 flat, mean |difference| 0.0023 (chord
+/// test alone: 0.1855 and 0.0085; without either test, before the
+/// receivers were lifted, 0.48 and 0.31).
+#[test]
+fn open_wavy_sheet_stays_close_to_flat_mode() {
+    let scene = wavy_sheet();
     let (_, fb) = blocked(flat(), &scene, 0);
     let (h, hb) = blocked(two_level(NearRings::Two, 2), &scene, 0);
     assert_eq!(h.coarse_triangle_count(0), Some(156));
@@ -169,6 +174,57 @@ fn open_wavy_sheet_stays_close_to_flat_mode() {
     assert!(flat_mean > 0.05, "the waves must shadow: {flat_mean}");
     assert!((mean - flat_mean).abs() < 0.02, "{mean} vs {flat_mean}");
     assert!(mean_abs < 0.005, "{mean_abs}");
+}
+
+/// The paper's hierarchy (§3.2: the fine one-ring "in the vicinity of a
+/// vertex", the coarse mesh "for the remaining parts") on the wavy sheet:
+/// with the coarse triangles over the vicinity replaced it stays close to
+/// flat mode; kept, the chords over the valleys cover what the fine sheet
+/// leaves open (the cloth's transfer error 52.6% against unshadowed's
+/// 16.6%). Measured: mean |difference| of the blocked fraction from flat
+/// mode 0.0027 replaced, 0.282 kept.
+#[test]
+fn the_papers_coarse_mesh_stays_away_from_the_receiver() {
+    let scene = wavy_sheet();
+    let (_, fb) = blocked(flat(), &scene, 0);
+    let n = fb.len() as f32;
+    let mean_abs = |replace: bool| {
+        let Hierarchy::TwoLevel {
+            coarse_divisor,
+            min_coarse_triangles,
+            near,
+            near_reach,
+            ..
+        } = Hierarchy::PAPER
+        else {
+            unreachable!("the paper's hierarchy has two levels")
+        };
+        let config = Config {
+            hierarchy: Hierarchy::TwoLevel {
+                coarse_divisor,
+                min_coarse_triangles,
+                near,
+                near_reach,
+                replace_near_chords: replace,
+            },
+            ..Config::default()
+        };
+        let (_, hb) = blocked(config, &scene, 0);
+        fb.iter().zip(&hb).map(|(a, b)| (a - b).abs()).sum::<f32>() / n
+    };
+    let (replaced, kept) = (mean_abs(true), mean_abs(false));
+    eprintln!(
+        "paper's hierarchy on the wavy sheet: mean |diff| {replaced:.4} replaced, {kept:.4} kept"
+    );
+    assert!(matches!(
+        Hierarchy::PAPER,
+        Hierarchy::TwoLevel {
+            replace_near_chords: true,
+            ..
+        }
+    ));
+    assert!(replaced < 0.01, "{replaced}");
+    assert!(kept > 5.0 * replaced, "{kept} against {replaced}");
 }
 
 /// The coarse mesh indexes the original vertices, so it follows a
@@ -380,4 +436,85 @@ fn receivers_enclosed_by_their_body_see_no_cracks() {
             assert!(max < 0.01, "reach {reach}: {max}");
         }
     }
+}
+
+/// A turned pawn (352 triangles) standing on a checkerboard of 32 separate
+/// squares, under the paper's hierarchy (a tenth of every object): the
+/// simplifier cannot take the board below 36 triangles without removing
+/// squares (56% of its area kept), and the pawn at a tenth keeps 78% of
+/// its own; both are redone with more triangles ([`MIN_AREA_KEPT`]), the
+/// board used whole. Measured: the pawn at 140 coarse triangles, its mean
+/// blocked fraction 0.2432 against flat mode's 0.2441 (without the rule,
+/// on the chess scene, the pawns lost 0.21–0.24 of 0.43–0.46: the board
+/// seen through its holes).
+///
+/// [`MIN_AREA_KEPT`]: super::parts::MIN_AREA_KEPT
+#[test]
+fn simplification_cuts_no_holes() {
+    let profile: Vec<glam::Vec2> = [
+        [0.0, 0.0],
+        [17.0, 0.0],
+        [17.0, 5.0],
+        [13.0, 9.0],
+        [8.0, 14.0],
+        [6.0, 25.0],
+        [11.0, 27.0],
+        [11.0, 29.0],
+        [7.5, 31.0],
+        [10.8, 37.0],
+        [10.0, 43.7],
+        [5.5, 48.5],
+        [0.0, 50.0],
+    ]
+    .iter()
+    .map(|&p| glam::Vec2::from(p) * 1e-3)
+    .collect();
+    let pawn = shadow_core::shapes::lathe("pawn", &profile, 16).unwrap();
+    let (mut corners, mut squares) = (Vec::new(), Vec::new());
+    for (i, j) in (0..8).flat_map(|i| (0..8).map(move |j| (i, j))) {
+        if (i + j) % 2 == 0 {
+            let b = corners.len() as u32;
+            let (x, z) = (0.06 * (i as f32 - 4.0), 0.06 * (j as f32 - 4.0));
+            corners.extend([
+                Vec3::new(x, 0.0, z),
+                Vec3::new(x + 0.06, 0.0, z),
+                Vec3::new(x + 0.06, 0.0, z + 0.06),
+                Vec3::new(x, 0.0, z + 0.06),
+            ]);
+            squares.extend([[b, b + 2, b + 1], [b, b + 3, b + 2]]);
+        }
+    }
+    let board = Mesh::new("board", corners, None, squares).unwrap();
+    let pawn_vertices = pawn.vertex_count();
+    let scene = Scene::still("pawn", vec![object(pawn), object(board)], camera()).unwrap();
+    let (_, fb) = blocked(flat(), &scene, 0);
+    let paper = Config {
+        hierarchy: Hierarchy::PAPER,
+        ..Config::default()
+    };
+    let (h, hb) = blocked(paper, &scene, 0);
+    let coarse = h.coarse_triangle_count(0).unwrap();
+    assert!(
+        (36..=176).contains(&coarse),
+        "pawn: {coarse} coarse triangles"
+    );
+    assert_eq!(
+        h.coarse_triangle_count(1),
+        Some(64),
+        "the board is used whole"
+    );
+    let n = pawn_vertices as f32;
+    let flat_mean = fb[..pawn_vertices].iter().sum::<f32>() / n;
+    let mean = hb[..pawn_vertices].iter().sum::<f32>() / n;
+    eprintln!(
+        "pawn on a checkerboard: mean blocked {mean:.4}, flat {flat_mean:.4}, {coarse} coarse"
+    );
+    assert!(
+        flat_mean > 0.15,
+        "the board must shadow the pawn: {flat_mean}"
+    );
+    assert!(
+        (mean - flat_mean).abs() < 0.01,
+        "{mean} against {flat_mean}"
+    );
 }
