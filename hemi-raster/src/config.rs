@@ -142,12 +142,19 @@ impl Hierarchy {
 }
 
 impl Default for Hierarchy {
-    /// One tenth of every object's triangles, at least 300, with the
-    /// two-ring, plus the fine triangles within twice the mean coarse
-    /// triangle radius. The paper's Table 1 has about a tenth; a floor of
-    /// 300 rather than a few dozen keeps small objects (chess pieces) from
-    /// being simplified into shapes that shadow their neighbours badly
-    /// (docs/measurements.md).
+    /// One tenth of every object's triangles (the paper's Table 1), at
+    /// least 300, or more where a tenth would lose a tenth of the object's
+    /// area (the `hierarchy` module docs), with the two-ring, plus the fine
+    /// triangles within twice the mean coarse triangle radius. The floor
+    /// keeps small objects nearly whole, so that their coarse mesh does
+    /// not hang on rounding: the simplifier breaks the ties of a
+    /// symmetric mesh by it, and without the floor an icosphere of 320
+    /// triangles resting on a box took a different coarse shape at each
+    /// scale, changing a blocked fraction by up to 24 of 812 pixels
+    /// between scales of the scene (and 12 between places). Without it,
+    /// `min_coarse_triangles: 0`, the transfer error of the human, cloth
+    /// and chess moves by at most 0.03 points and the chess's blockers per
+    /// receiver fall from 2,581 to 1,148 (docs/measurements.md).
     fn default() -> Self {
         Hierarchy::TwoLevel {
             coarse_divisor: NonZeroU32::new(10).expect("10 is not zero"),

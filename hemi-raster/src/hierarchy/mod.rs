@@ -9,9 +9,13 @@
 //! at the same position (UV or normal seams) are welded to their first copy
 //! before simplifying, otherwise the simplifier would keep every seam; the
 //! copies move together under any pose that gives equal inputs equal outputs.
-//! An object whose simplified triangle count would not be below its own is used whole, and
-//! a receiver then sees exactly the triangles of [`crate::Hierarchy::Flat`]:
-//! nothing is dropped for it, nor listed.
+//! A simplification that keeps less than [`MIN_AREA_KEPT`](parts::MIN_AREA_KEPT)
+//! (90%) of the object's surface area has cut holes or flattened its shape,
+//! and is redone with twice the triangles: the far field must block what
+//! the object blocks. An object whose simplified triangle count would not
+//! be below its own is used whole, and a receiver then sees exactly the
+//! triangles of [`crate::Hierarchy::Flat`]: nothing is dropped for it, nor
+//! listed.
 //!
 //! # Bodies
 //! Objects that are not used whole, cull alike and touch in the reference
