@@ -4,7 +4,8 @@
 //! another closed object: it receives no light), and the *contact planes*
 //! through it (another object's triangle through the lifted vertex, the
 //! floor under a box's side: it blocks the half of the hemisphere that sees
-//! its front).
+//! its front, or the part of that half across the triangle's edges where the
+//! vertex stands on one, [`ContactCone`]).
 //!
 //! - **Pressed** is the reference's own test
 //!   ([`SceneBvh::pressed`](crate::bvh::SceneBvh::pressed)): each of the
@@ -79,9 +80,9 @@ pub struct Contact {
     /// Pressed on another object's surface or buried inside another closed
     /// object: the vertex receives no light.
     pub enclosed: bool,
-    /// Unit front normals of the contact planes: each blocks the directions
-    /// d with d·n < 0.
-    pub planes: Vec<Vec3>,
+    /// What the contact planes block: each the directions that see its
+    /// front, across the edges the vertex's foot lies on ([`ContactCone`]).
+    pub planes: Vec<ContactCone>,
 }
 
 impl Contacts {
@@ -249,15 +250,44 @@ impl Surface {
     }
 }
 
+/// The directions a contact triangle blocks ([`contact_plane`]): those on
+/// the positive side of all three planes, d·p > 0 for each p in `planes`.
+/// In the limit the reference takes, a direction from the receiver meets
+/// the triangle's plane at the receiver's foot, just off it along the
+/// direction's part in the plane: it is blocked when it sees the plane's
+/// front and that part points into the triangle. With the foot inside the
+/// triangle that is the front half (each plane the reversed front normal);
+/// on an edge, the half of that half across the edge (one plane the edge's
+/// inward normal in the triangle's plane: the end of a wall on the floor
+/// blocks the quarter toward the wall); at a corner, the wedge of the
+/// corner's angle (a box's side at the floor vertex under the box's corner:
+/// each side the quarter toward the box, not a half each).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactCone {
+    /// Unit front normal of the triangle.
+    pub front: Vec3,
+    /// Unit plane normals whose positive sides bound what it blocks.
+    pub planes: [Vec3; 3],
+}
+
+impl ContactCone {
+    /// Whether direction `d` is blocked.
+    pub fn blocks(&self, d: Vec3) -> bool {
+        self.planes.iter().all(|p| p.dot(d) > 0.0)
+    }
+}
+
 /// Whether triangle (a, b, c), given relative to a lifted vertex with unit
 /// normal `normal`, is a contact plane of it with reach `reach`
 /// ([`CONTACT_REACH`] of its lift): its plane passes through the vertex or
 /// in front of it within the reach (the vertex on the plane or behind it),
 /// its extent covers the vertex's foot on the plane (within the reach of
-/// its edges), and some corner is above the vertex's horizon. Returns the
-/// triangle's unit front normal: the directions d with d·n < 0 see its
-/// front and are blocked.
-pub fn contact_plane([a, b, c]: [Vec3; 3], normal: Vec3, reach: f32) -> Option<Vec3> {
+/// its edges), and some corner is above the vertex's horizon. Returns what
+/// it blocks ([`ContactCone`]): the directions that see its front and,
+/// across each edge the foot lies on (within the reach), enter it. A
+/// triangle whose three edges all lie within the reach of the foot (smaller
+/// than the reach) blocks the front half.
+pub fn contact_plane([a, b, c]: [Vec3; 3], normal: Vec3, reach: f32) -> Option<ContactCone> {
     let above = a.dot(normal) > 0.0 || b.dot(normal) > 0.0 || c.dot(normal) > 0.0;
     let (ab, bc, ca) = (a.cross(b), b.cross(c), c.cross(a));
     let n = ab + bc + ca;
@@ -265,12 +295,27 @@ pub fn contact_plane([a, b, c]: [Vec3; 3], normal: Vec3, reach: f32) -> Option<V
     let det = ab.dot(c);
     let reach2 = reach * reach;
     let through = det >= 0.0 && det * det <= reach2 * n2 && n2 > 0.0;
-    let inside = |edge: Vec3, from: Vec3, to: Vec3| {
+    // (a × b)·n is the foot's distance from edge ab, inside positive, times
+    // |b − a| |n|.
+    let edges = [(ab, a, b), (bc, b, c), (ca, c, a)].map(|(edge, from, to)| {
         let d = edge.dot(n);
-        d >= 0.0 || d * d <= reach2 * (to - from).length_squared() * n2
-    };
-    (above && through && inside(ab, a, b) && inside(bc, b, c) && inside(ca, c, a))
-        .then(|| n.normalize())
+        let on = d * d <= reach2 * (to - from).length_squared() * n2;
+        (d >= 0.0 || on, on, to - from)
+    });
+    if !(above && through && edges.iter().all(|e| e.0)) {
+        return None;
+    }
+    let front = n.normalize();
+    let on_all = edges.iter().all(|e| e.1);
+    // n × (b − a) points from edge ab into the triangle, toward c.
+    let planes = edges.map(|(_, on, along)| {
+        if on && !on_all {
+            n.cross(along).normalize()
+        } else {
+            -front
+        }
+    });
+    Some(ContactCone { front, planes })
 }
 
 /// Whether `b` grown by `margin` holds `p`.
@@ -346,9 +391,14 @@ mod tests {
             } else if n.y.abs() < 0.5 && p.y == 0.0 {
                 assert!(!got.enclosed, "side {v} at {p}");
                 assert!(!got.planes.is_empty(), "side {v} at {p}");
-                for plane in &got.planes {
-                    assert!(plane.abs_diff_eq(Vec3::Y, 1e-6), "{plane}");
+                for cone in &got.planes {
+                    assert!(cone.front.abs_diff_eq(Vec3::Y, 1e-6), "{cone:?}");
                 }
+                // The floor's one cell covers the box: every direction
+                // down is blocked, none up.
+                let down = |d: Vec3| got.planes.iter().any(|c| c.blocks(d));
+                assert!(down(Vec3::new(0.3, -0.1, 0.2)) && down(Vec3::new(-0.2, -0.9, -0.3)));
+                assert!(!down(Vec3::new(0.3, 0.1, 0.2)));
                 touching += 1;
             } else {
                 assert_eq!(got, Contact::default(), "{v} at {p}");
@@ -418,9 +468,13 @@ mod tests {
             ]
         };
         let reach = 1e-3;
-        assert_eq!(contact_plane(floor(0.0), Vec3::Z, reach), Some(Vec3::Y));
+        let half = Some(ContactCone {
+            front: Vec3::Y,
+            planes: [Vec3::NEG_Y; 3],
+        });
+        assert_eq!(contact_plane(floor(0.0), Vec3::Z, reach), half);
         // The vertex behind (below) the plane within the reach.
-        assert_eq!(contact_plane(floor(0.5e-3), Vec3::Z, reach), Some(Vec3::Y));
+        assert_eq!(contact_plane(floor(0.5e-3), Vec3::Z, reach), half);
         // Beyond the reach, or in front (above) of the plane: a cone.
         assert_eq!(contact_plane(floor(2e-3), Vec3::Z, reach), None);
         assert_eq!(contact_plane(floor(-0.5e-3), Vec3::Z, reach), None);
@@ -430,5 +484,55 @@ mod tests {
         // Wholly below the horizon.
         let below = floor(0.0).map(|p| p - Vec3::new(0.0, 0.0, 4.0));
         assert_eq!(contact_plane(below, Vec3::Z, reach), None);
+    }
+
+    /// A floor vertex at the end of a wall's foot, and one under a box's
+    /// corner: the wall's end blocks the quarter toward the wall, each side
+    /// of the box the quarter toward the box, where a half each would have
+    /// blocked three quarters (the floor vertex sees the box's corner as a
+    /// quadrant: of its cosine-weighted hemisphere, a quarter).
+    #[test]
+    fn contacts_at_an_edge_or_a_corner_block_only_what_lies_across_them() {
+        let reach = 1e-3;
+        // The wall x = 0, z ≤ 0, front toward −x; the vertex at its end
+        // (z = 0) facing up, lifted: the wall's foot a lift (4 reaches)
+        // under it.
+        let wall = [
+            Vec3::new(0.0, -4e-3, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, -4e-3, -1.0),
+        ];
+        let cone = contact_plane(wall, Vec3::Y, reach).unwrap();
+        assert!(cone.front.abs_diff_eq(Vec3::NEG_X, 1e-6), "{cone:?}");
+        assert!(cone.blocks(Vec3::new(0.5, 0.5, -0.5)));
+        assert!(
+            !cone.blocks(Vec3::new(0.5, 0.5, 0.5)),
+            "beyond the wall's end"
+        );
+        assert!(!cone.blocks(Vec3::new(-0.5, 0.5, -0.5)), "its back");
+
+        // The box x ≤ 0, z ≤ 0 on the floor: the vertex at its corner.
+        let meshes = {
+            let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 2).unwrap();
+            let cube = shapes::cuboid(
+                "box",
+                Vec3::new(-0.5, 0.0, -0.5),
+                Vec3::new(0.0, 0.5, 0.0),
+                false,
+            )
+            .unwrap();
+            vec![floor, cube]
+        };
+        let corner = (meshes[0].positions().iter())
+            .position(|p| p.length() < 1e-6)
+            .unwrap();
+        let contacts = Contacts::new(&frame(meshes), &[false, true]).unwrap();
+        let got = contacts.at(0, corner);
+        assert!(!got.enclosed && !got.planes.is_empty(), "{got:?}");
+        let blocked = |d: Vec3| got.planes.iter().any(|c| c.blocks(d));
+        assert!(blocked(Vec3::new(-0.5, 0.5, -0.5)), "into the box");
+        assert!(!blocked(Vec3::new(-0.5, 0.5, 0.5)), "beside its x face");
+        assert!(!blocked(Vec3::new(0.5, 0.5, -0.5)), "beside its z face");
+        assert!(!blocked(Vec3::new(0.5, 0.5, 0.5)), "away from it");
     }
 }

@@ -23,7 +23,8 @@ pub(crate) struct EdgePlanes {
 /// edge planes; `contact` is the receiver's contact reach
 /// ([`TangentFrame::contact`](crate::TangentFrame::contact)): a triangle
 /// whose plane passes within it of the receiver, over the receiver, blocks
-/// the half of the hemisphere that sees its front (module docs). Branch-free,
+/// the half of the hemisphere that sees its front, or the part of it across
+/// the edges the receiver's foot lies on (module docs). Branch-free,
 /// so that the per-receiver loop evaluates it 16 triangles at a time.
 #[inline(always)]
 pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool, contact: f32) -> EdgePlanes {
@@ -42,11 +43,16 @@ pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool, contact: 
     // The receiver's foot on the plane is inside the triangle, or within the
     // reach of its edges: (a × b)·n is the foot's distance from edge ab
     // times |b − a| |n|.
-    let inside = |edge: Vec3, from: Vec3, to: Vec3| {
+    let on = |edge: Vec3, from: Vec3, to: Vec3| {
         let d = edge.dot(n);
-        (d >= 0.0) | (d * d <= reach2 * (to - from).length_squared() * n2)
+        (
+            d >= 0.0,
+            d * d <= reach2 * (to - from).length_squared() * n2,
+        )
     };
-    let contact = above & through & inside(ab, a, b) & inside(bc, b, c) & inside(ca, c, a);
+    let edges = [(ab, a, b), (bc, b, c), (ca, c, a)];
+    let [(in_ab, on_ab), (in_bc, on_bc), (in_ca, on_ca)] = edges.map(|(e, f, t)| on(e, f, t));
+    let contact = above & through & (in_ab | on_ab) & (in_bc | on_bc) & (in_ca | on_ca);
     // Anywhere else off the plane the cone is exact, however close: its
     // three planes tend to the triangle's own. Exactly on the plane and
     // beside the triangle it is empty (false for NaN too).
@@ -54,8 +60,19 @@ pub(crate) fn edge_planes([a, b, c]: [Vec3; 3], cull_back_faces: bool, contact: 
     let behind = det > 0.0;
     let s = if det < 0.0 { -1.0 } else { 1.0 };
     let normals = if contact {
-        // The directions that see the front face: d·n < 0.
-        [-n; 3]
+        // The directions that see the front face, d·n < 0, and across each
+        // edge the foot lies on enter the triangle: n × (b − a) points from
+        // ab toward c (shadow-core's `ContactCone`); all three edges within
+        // the reach (a triangle smaller than it), the front half.
+        let all = on_ab & on_bc & on_ca;
+        let plane = |on: bool, (_, from, to): (Vec3, Vec3, Vec3)| {
+            if on & !all { n.cross(to - from) } else { -n }
+        };
+        [
+            plane(on_ab, edges[0]),
+            plane(on_bc, edges[1]),
+            plane(on_ca, edges[2]),
+        ]
     } else {
         [s * ab, s * bc, s * ca]
     };

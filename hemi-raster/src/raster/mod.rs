@@ -32,7 +32,12 @@
 //! reach of its edges), and which shows above the horizon, blocks the
 //! half-space of directions that see its front face, d·n < 0 with
 //! n = (b − a) × (c − a): one plane mask, drawn as the AND of that plane
-//! three times. That is the limit the Monte-Carlo reference takes, whose
+//! three times. Where the foot lies on an edge (within the reach), only the
+//! directions whose trace on the plane, leaving the foot, enters the
+//! triangle across it: the edge's plane is replaced by the one through n
+//! and the edge, so that the end of a wall on the floor blocks the quarter
+//! toward the wall and a box's corner the quadrant of the box, not a half
+//! for each face (shadow-core's `ContactCone`). That is the limit the Monte-Carlo reference takes, whose
 //! shadow rays back up half a lift ε along themselves and count a hit
 //! nearer than ε only on a front face
 //! ([`SceneBvh::unoccluded_from`](shadow_core::bvh::SceneBvh::unoccluded_from)):

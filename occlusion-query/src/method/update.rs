@@ -269,13 +269,13 @@ fn contacts(
         .for_each(|((out, push), (i, &(o, v)))| {
             let contact = contacts.at(o, v);
             for (j, l) in lights.iter().enumerate() {
-                if contact.enclosed || contact.planes.iter().any(|p| p.dot(*l) < 0.0) {
+                if contact.enclosed || contact.planes.iter().any(|c| c.blocks(*l)) {
                     out[j / 32] |= 1 << (j % 32);
                 }
             }
             let most = reach(i);
             let cut = 1.0 - (0.5 * contacts.clearance(o, v, 2.0 * most) / most).min(1.0);
-            *push = (contact.planes.iter().sum::<Vec3>())
+            *push = (contact.planes.iter().map(|c| c.front).sum::<Vec3>())
                 .normalize_or_zero()
                 .extend(cut);
         });

@@ -70,7 +70,7 @@ pub const STRESS_SCENES: &[(&str, &str)] = &[
     ),
     (
         "scan-on-floor",
-        "nothing: the plain twin of the three scenes after it, a 1 m scan (the 1.8k-vertex bunny) resting on a floor 3 m across under a white sky",
+        "nothing: the plain twin of the three scenes after it, a 1 m scan (the 1.8k-vertex bunny) resting on a floor 3 m across under a sky fading to black at the horizon",
     ),
     (
         "large-floor",
@@ -151,18 +151,18 @@ pub fn stress_scene(name: &str) -> Result<StressScene> {
         "slivers" => (slivers(name)?, uniform()),
         "coarse" => (coarse(name)?, uniform()),
         "sun-only" => (still(name, sphere_on_floor(1.0, 31)?)?, sun()?),
-        "scan-on-floor" => (scan_on_floor(name, 3.0, Affine3A::IDENTITY)?, uniform()),
+        "scan-on-floor" => (scan_on_floor(name, 3.0, Affine3A::IDENTITY)?, sky()?),
         "large-floor" => (
             scan_on_floor(name, LARGE_FLOOR, Affine3A::IDENTITY)?,
-            uniform(),
+            sky()?,
         ),
         "far-away" => (
             scan_on_floor(name, 3.0, Affine3A::from_translation(FAR_AWAY))?,
-            uniform(),
+            sky()?,
         ),
         "scaled-up" => (
             scan_on_floor(name, 3.0, Affine3A::from_scale(Vec3::splat(SCALED_UP)))?,
-            uniform(),
+            sky()?,
         ),
         _ => unreachable!("every listed stress scene is built"),
     };
@@ -224,6 +224,23 @@ fn horizon_blocker(name: &str) -> Result<Scene> {
         [1, 1, 24],
     )?;
     still(name, vec![floor, wall])
+}
+
+/// The light of the scan and its twins: a sky whose radiance is the sine of
+/// the elevation (1 at the zenith, 0 at the horizon) over a black ground.
+/// Every direction a point of the scan sees below its floor's plane is dark
+/// whether the floor reaches there or not, so the scan's true radiance is
+/// the same on a 3 m floor as on a 200 m one, and a twin's error moves only
+/// by what the method does. Under the whole white sphere the larger floor
+/// takes light the smaller lets through (unshadowed's error 1.40× its
+/// twin's), and a sky cut off at the horizon puts the methods' angular
+/// resolution on the line where the twins differ (the large floor's edge
+/// lies 0.2° below it): hemi-raster's direct integration 0.80% on the twin
+/// and 2.42% on the large floor, occlusion-query with 1026 directions 0.68%
+/// and 1.95%, though the truth is the same. Fading to zero, the sky holds
+/// almost no light where either floor ends.
+fn sky() -> Result<Environment> {
+    procedural("sky", 256, 128, |d| Vec3::splat(d.y.max(0.0)))
 }
 
 /// The light of `horizon-blocker`: a dim sky (0.05) and a band 20 times

@@ -79,7 +79,8 @@ fn a_box_on_a_floor_is_shadowed_where_it_touches() {
 
 /// A floor vertex on the foot line of a wall standing on the floor sees the
 /// wall's face as the half it covers (0 before), the wall's vertex on the
-/// floor the floor's half; both within the mask's rounding of ½.
+/// floor the floor's half; both within the mask's rounding of ½; a floor
+/// vertex at an end of the foot line, the quarter.
 #[test]
 fn the_foot_of_a_wall_blocks_half() {
     let floor = shapes::floor("floor", Vec3::ZERO, 1.0, 4).unwrap();
@@ -104,6 +105,18 @@ fn the_foot_of_a_wall_blocks_half() {
         .unwrap();
     let got = b[f.vertex_count() + base];
     assert!((got - 0.5).abs() < 0.01, "wall vertex: {got}");
+    // At either end of the foot line the wall covers the quarter toward it
+    // (a half before: the reference there gives 0.25 within its noise).
+    for z in [0.5, -0.5] {
+        let end = (0..f.vertex_count())
+            .find(|&v| f.positions()[v] == Vec3::new(0.5, 0.0, z))
+            .unwrap();
+        assert!(
+            (b[end] - 0.25).abs() < 0.01,
+            "floor vertex at z = {z}: {}",
+            b[end]
+        );
+    }
 }
 
 /// A closed ball sunk halfway into a closed box: the ball's vertices inside
