@@ -246,8 +246,14 @@ fn sphere(b: &Aabb) -> (Vec3, f32) {
 }
 
 /// The occluder's depth range is its sphere's, widened by this fraction of
-/// the radius (and a little more), so that rounding never clips a vertex.
+/// the radius, so that rounding never clips a vertex.
 const DEPTH_PADDING: f32 = 1e-3;
+
+/// And by this many units in the last place of the height it stands at:
+/// the rounding of coordinates far from the origin. Neither term is
+/// absolute, nor grows with the distance beyond the rounding, so the same
+/// plan moved 10 km gives the same maps.
+const DEPTH_ROUNDING: f32 = 4.0 * f32::EPSILON;
 
 impl Plan {
     /// The maps between the groups of objects with bounds `objects` under
@@ -276,7 +282,7 @@ impl Plan {
                     }
                     let offset = occluder - centre;
                     let height = occluder.dot(omega);
-                    let pad = DEPTH_PADDING * (occluder_radius + height.abs()) + 1e-6;
+                    let pad = DEPTH_PADDING * occluder_radius + DEPTH_ROUNDING * height.abs();
                     let (near, far) = (
                         height - occluder_radius - pad,
                         height + occluder_radius + pad,
@@ -443,6 +449,45 @@ mod tests {
             !pairs.contains(&(0, 1)) && !pairs.contains(&(0, 2)),
             "{pairs:?}"
         );
+    }
+
+    /// The same plan moved far from the origin gives the same maps, within
+    /// the rounding of f32 there (the padding's 4 units in the last place
+    /// of the height and the ulp of near and far, 1.4 cm in all at 17 km of
+    /// height, on windows 0.7 m deep; measured 1.35 cm): their depth windows were
+    /// padded by 10⁻³ of the world height, 1.3× wider at 1 km under a 45°
+    /// light and about 4× at 10 km.
+    #[test]
+    fn the_same_plan_translated_gives_the_same_maps() {
+        let floor = Aabb {
+            min: Vec3::new(-1.0, 0.0, -1.0),
+            max: Vec3::new(1.0, 0.0, 1.0),
+        };
+        let ball = cube(Vec3::new(0.0, 0.5, 0.0), 0.2);
+        let lights = [light(Vec3::new(1.0, 1.0, 0.0), 0.05), light(Vec3::Y, 0.2)];
+        let plan_at = |t: Vec3| {
+            let objects = [floor, ball].map(|b| Aabb {
+                min: b.min + t,
+                max: b.max + t,
+            });
+            let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &objects).unwrap();
+            Plan::new(&lights, &objects, &groups, 64)
+        };
+        let here = plan_at(Vec3::ZERO);
+        assert!(!here.maps.is_empty());
+        for t in [
+            Vec3::new(1e3, 1e3, 0.0),
+            Vec3::new(6e3, 0.0, -8e3),
+            Vec3::splat(1e4),
+        ] {
+            let there = plan_at(t);
+            assert_eq!(here.ranges, there.ranges, "{t}");
+            for (a, b) in here.maps.iter().zip(&there.maps) {
+                approx::assert_relative_eq!(a.inverse_side, b.inverse_side, max_relative = 2e-2);
+                approx::assert_relative_eq!(a.spread, b.spread, max_relative = 2e-2);
+                approx::assert_relative_eq!(a.far - a.near, b.far - b.near, epsilon = 3e-2);
+            }
+        }
     }
 
     #[test]

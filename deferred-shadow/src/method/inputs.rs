@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use glam::{Affine3A, Mat3, Mat4};
+use glam::{Affine3A, Mat3, Mat4, Quat};
 use shadow_core::{Capability, Environment, Error, FrameGeometry, Result, Stage};
 
 use super::refresh::world_bounds;
@@ -145,13 +145,91 @@ impl DeferredShadow {
     }
 }
 
-/// A rigid transform's rotation, refused unless it scales evenly.
+/// A rigid transform's rotation: refused, naming what is wrong, unless the
+/// transform is finite, turns without mirroring and scales evenly (to 1e-3
+/// of its scale), the only poses under which the precomputed
+/// self-shadowing holds. The rotation is re-normalized, so that the SH
+/// rotations built from it always exist.
 pub(super) fn rigid(name: &str, t: Affine3A) -> Result<(Affine3A, Mat3)> {
-    let (scale, rotation, _) = t.to_scale_rotation_translation();
-    if scale.max_element() > scale.min_element() * (1.0 + 1e-3) {
-        return Err(Error::InvalidScene(format!(
-            "{NAME}: object {name} is scaled unevenly ({scale}), which changes its self-shadowing"
-        )));
+    let refuse = |what: String| {
+        Err(Error::InvalidScene(format!(
+            "{NAME}: object {name} {what}, which changes its self-shadowing"
+        )))
+    };
+    let m = Mat3::from(t.matrix3);
+    let det = m.determinant();
+    if !(m.is_finite() && t.translation.is_finite() && det.is_finite()) {
+        return refuse("has a pose that is not finite".into());
     }
-    Ok((t, Mat3::from_quat(rotation)))
+    if det.abs() < f32::MIN_POSITIVE {
+        return refuse(format!("has a pose of zero scale (determinant {det})"));
+    }
+    if det < 0.0 {
+        return refuse(format!("is mirrored (determinant {det})"));
+    }
+    let r = m * det.cbrt().recip();
+    let gram = r.transpose() * r - Mat3::IDENTITY;
+    if gram.to_cols_array().iter().any(|e| e.abs() > 2e-3) {
+        let lengths = [m.x_axis, m.y_axis, m.z_axis].map(|c| c.length());
+        return refuse(format!(
+            "is sheared or scaled unevenly (columns {lengths:?} long, {:.3} from orthogonal)",
+            gram.to_cols_array()
+                .iter()
+                .fold(0.0f32, |a, e| a.max(e.abs()))
+        ));
+    }
+    Ok((t, Mat3::from_quat(Quat::from_mat3(&r).normalize())))
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+    use shadow_core::sh::ShRotation;
+
+    use super::*;
+
+    fn refusal(t: Affine3A) -> String {
+        match rigid("box", t) {
+            Err(Error::InvalidScene(message)) => message,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Zero scale gave a NaN rotation, a shear with equal column lengths a
+    /// non-unit quaternion (both panicked in the SH rotation), a mirror was
+    /// called uneven scaling.
+    #[test]
+    fn poses_that_are_not_rigid_are_refused_by_what_they_are() {
+        assert!(refusal(Affine3A::from_scale(Vec3::ZERO)).contains("zero scale"));
+        let shear =
+            Affine3A::from_mat3(Mat3::from_cols(Vec3::X, Vec3::new(0.6, 0.8, 0.0), Vec3::Z));
+        assert!(refusal(shear).contains("sheared"), "{}", refusal(shear));
+        let mirror = Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0));
+        assert!(refusal(mirror).contains("mirrored"));
+        assert!(refusal(Affine3A::from_scale(Vec3::new(1.0, 2.0, 1.0))).contains("unevenly"));
+        let nan = Affine3A::from_translation(Vec3::new(f32::NAN, 0.0, 0.0));
+        assert!(refusal(nan).contains("not finite"));
+    }
+
+    /// Every accepted pose, however large, small or turned, gives a rotation
+    /// the SH rotations accept.
+    #[test]
+    fn rigid_poses_give_proper_rotations_at_any_scale() {
+        for scale in [1e-7, 1.0, 3.5, 1e7] {
+            for turn in [0.0, 0.3, 2.9] {
+                let rotation = Quat::from_axis_angle(Vec3::new(1.0, 2.0, -0.5).normalize(), turn);
+                let t = Affine3A::from_scale_rotation_translation(
+                    Vec3::splat(scale),
+                    rotation,
+                    Vec3::new(1e4, 0.0, -3.0),
+                );
+                let (_, r) = rigid("box", t).unwrap();
+                assert!(
+                    r.abs_diff_eq(Mat3::from_quat(rotation), 1e-5),
+                    "{scale} {turn}"
+                );
+                assert!(ShRotation::from_mat3(crate::DIFFUSE_ORDER, r).is_some());
+            }
+        }
+    }
 }

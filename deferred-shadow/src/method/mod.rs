@@ -50,6 +50,11 @@ pub struct DeferredShadow {
     scene: Option<Prepared>,
     lit: Option<Lit>,
     posed: Option<Posed>,
+    /// The last `update` and `relight` succeeded: the GPU holds their
+    /// objects and maps. A failed one leaves them partly the old frame's
+    /// and partly the new one's, and shading is refused until one
+    /// succeeds.
+    current: bool,
     profile: Profile,
 }
 
@@ -135,6 +140,7 @@ impl DeferredShadow {
             scene: None,
             lit: None,
             posed: None,
+            current: false,
             profile: Profile::default(),
         })
     }
@@ -165,6 +171,15 @@ impl DeferredShadow {
             scene.parts.iter().map(|p| p.transfer.seconds).sum(),
             scene.parts.iter().map(|p| p.transfer.bytes()).sum(),
         ))
+    }
+
+    /// Runs `change`, an `update` or `relight`: until one succeeds after it
+    /// fails, shading is refused ([`DeferredShadow::current`]).
+    fn changing(&mut self, change: impl FnOnce(&mut Self) -> Result<()>) -> Result<()> {
+        self.current = false;
+        change(self)?;
+        self.current = true;
+        Ok(())
     }
 
     fn prepared(&self) -> Result<&Prepared> {
@@ -210,6 +225,7 @@ impl ShadowMethod for DeferredShadow {
     fn prepare(&mut self, scene: &Scene) -> Result<()> {
         self.scene = None;
         self.posed = None;
+        self.current = false;
         self.profile = Profile::default();
         self.scene = Some(self.prepare_scene(scene)?);
         Ok(())
@@ -219,14 +235,18 @@ impl ShadowMethod for DeferredShadow {
     /// self-shadowed radiance, light weights and maps of the current poses.
     fn relight(&mut self, environment: &Environment) -> Result<()> {
         self.profile.begin(Stage::Relight);
-        self.light(environment)?;
-        self.run_refresh(Stage::Relight)
+        self.changing(|m| {
+            m.light(environment)?;
+            m.run_refresh(Stage::Relight)
+        })
     }
 
     fn update(&mut self, frame: &FrameGeometry, _camera: &Camera) -> Result<()> {
         self.profile.begin(Stage::Update);
-        self.pose(frame)?;
-        self.run_refresh(Stage::Update)
+        self.changing(|m| {
+            m.pose(frame)?;
+            m.run_refresh(Stage::Update)
+        })
     }
 
     fn shade(&mut self, eye: Vec3) -> Result<VertexRadiance> {
@@ -336,8 +356,10 @@ impl GpuStages for DeferredShadow {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
         self.profile.begin(Stage::Relight);
-        self.light(environment)?;
-        self.record_refresh(Stage::Relight, encoder)
+        self.changing(|m| {
+            m.light(environment)?;
+            m.record_refresh(Stage::Relight, encoder)
+        })
     }
 
     fn record_update(
@@ -347,8 +369,10 @@ impl GpuStages for DeferredShadow {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
         self.profile.begin(Stage::Update);
-        self.pose(frame)?;
-        self.record_refresh(Stage::Update, encoder)
+        self.changing(|m| {
+            m.pose(frame)?;
+            m.record_refresh(Stage::Update, encoder)
+        })
     }
 
     /// The deferred pass at the vertices, into `encoder`. Each recording

@@ -15,7 +15,7 @@ use crate::transfer::{Lighting, diffuse, glossy};
 impl DeferredShadow {
     /// Brings everything that depends on the poses and the lights up to
     /// date on the CPU and in GPU buffers; true when the maps must be
-    /// (re)drawn.
+    /// (re)drawn, which the caller marks when it has ([`Self::maps_drawn`]).
     pub(super) fn refresh(&mut self, stage: Stage) -> Result<bool> {
         let (Some(scene), Some(lit), Some(posed)) = (&mut self.scene, &self.lit, &mut self.posed)
         else {
@@ -103,8 +103,19 @@ impl DeferredShadow {
             reuse.iter().filter(|r| r.is_none()).count() as u64,
         );
         posed.planned = Some((plan, posed.transforms.clone()));
-        posed.maps_ready = true;
         Ok(true)
+    }
+
+    /// After the maps of [`Self::refresh`] were drawn (`drawn`), or failed
+    /// to be: they match the poses and lights, or the GPU may hold some of
+    /// them and none is kept.
+    fn maps_drawn(&mut self, drawn: bool) {
+        if let Some(posed) = &mut self.posed {
+            posed.maps_ready = drawn;
+            if !drawn {
+                posed.planned = None;
+            }
+        }
     }
 
     /// [`Self::refresh`], then the maps recorded into `encoder` if needed.
@@ -114,7 +125,9 @@ impl DeferredShadow {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<()> {
         if self.refresh(stage)? {
-            self.prepared()?.gpu.record_maps(encoder)?;
+            let recorded = self.prepared()?.gpu.record_maps(encoder);
+            self.maps_drawn(recorded.is_ok());
+            recorded?;
         }
         Ok(())
     }
@@ -125,9 +138,11 @@ impl DeferredShadow {
             let start = Instant::now();
             let ctx = Arc::clone(&self.ctx);
             let gpu = &self.prepared()?.gpu;
-            ctx.run("deferred-shadow: occlusion maps", |encoder| {
+            let drawn = ctx.run("deferred-shadow: occlusion maps", |encoder| {
                 gpu.record_maps(encoder)
-            })?;
+            });
+            self.maps_drawn(drawn.is_ok());
+            drawn?;
             self.profile
                 .seconds(stage, "occlusion maps (GPU)", start.elapsed().as_secs_f64());
         }

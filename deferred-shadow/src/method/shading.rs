@@ -11,6 +11,13 @@ impl DeferredShadow {
     /// L_s toward `eye` at every vertex (eq. 2, 13) and the light weights,
     /// uploaded unless the GPU has them already.
     pub(super) fn upload_shading(&mut self, eye: Vec3) -> Result<()> {
+        if self.posed.is_some() && self.lit.is_some() && !self.current {
+            return Err(Error::stage(
+                NAME,
+                "shade or render after a failed update or relight (the GPU holds maps of \
+                 neither frame); a successful update makes it current",
+            ));
+        }
         let q = self.config.lights;
         let (Some(scene), Some(posed), Some(_)) = (&mut self.scene, &mut self.posed, &self.lit)
         else {

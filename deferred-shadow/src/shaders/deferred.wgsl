@@ -94,7 +94,10 @@ fn brdf(o: GpuObject, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
     if any(o.specular.xyz > vec3<f32>(0.0)) {
         let e = o.specular.w;
         let r = 2.0 * dot(n, wo) * n - wo;
-        f += o.specular.xyz * pow(max(dot(r, wi), 0.0), e) * (e + 2.0) / (2.0 * PI);
+        // pow(0, 0) is undefined in WGSL (exp2(0 · log2 0)); the lobe of
+        // exponent 0 is the constant 1, as on the CPU.
+        let lobe = select(pow(max(dot(r, wi), 0.0), e), 1.0, e == 0.0);
+        f += o.specular.xyz * lobe * (e + 2.0) / (2.0 * PI);
     }
     return f;
 }
