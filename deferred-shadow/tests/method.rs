@@ -437,6 +437,61 @@ fn shading_after_a_failed_update_is_refused_until_one_succeeds() {
     assert_eq!(before.pixels, after.pixels);
 }
 
+/// Seen from inside the scene's bounds the near plane is 10⁻⁵ of the far
+/// distance, and with standard depth a sheet 1 mm over a floor 40 m away
+/// fought it (their depths a fraction of an f32 step apart near 1: 236 of
+/// the sheet's 960 pixels showed the floor); with depth reversed every
+/// pixel the exact rasterizer gives the dark sheet is dark (measured: all).
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn a_sheet_just_over_a_far_floor_does_not_fight_it_from_inside_the_bounds() {
+    let ctx = test_context();
+    let lambert = |albedo: f32| Brdf::lambert(Vec3::splat(albedo)).unwrap();
+    let floor = shapes::floor("floor", Vec3::ZERO, 100.0, 1).unwrap();
+    let sheet = shapes::floor("sheet", Vec3::new(0.0, 1e-3, -40.0), 5.0, 1).unwrap();
+    // A post far off lifts the bounds over the eye.
+    let post = shapes::cuboid(
+        "post",
+        Vec3::new(80.0, 0.0, 80.0),
+        Vec3::new(81.0, 10.0, 81.0),
+        false,
+    )
+    .unwrap();
+    let objects = [(floor, 0.9), (sheet, 0.1), (post, 0.9)]
+        .map(|(mesh, albedo)| Object {
+            mesh: Arc::new(mesh),
+            material: lambert(albedo),
+        })
+        .to_vec();
+    let eye = Vec3::new(0.0, 1.0, 0.0);
+    let camera = Camera::new(eye, Vec3::new(0.0, 0.0, -40.0), Vec3::Y, 0.04, 96, 64).unwrap();
+    let scene = Scene::still("sheet over a far floor", objects, camera).unwrap();
+    let frame = scene.frame_geometry(0).unwrap();
+    let bounds = frame.bounds();
+    assert!(eye.cmpge(bounds.min).all() && eye.cmple(bounds.max).all());
+    let mut method = DeferredShadow::new(ctx, Config::default()).unwrap();
+    run(&mut method, &scene, &Environment::uniform(Vec3::ONE));
+    let image = method.render(&camera).unwrap();
+    let exact = shadow_core::raster::visible_surface(&camera, &frame).unwrap();
+    let on_sheet: Vec<usize> = (exact.iter().enumerate())
+        .filter(|(_, hit)| hit.is_some_and(|h| h.object == 1))
+        .map(|(i, _)| i)
+        .collect();
+    assert!(on_sheet.len() > 500, "{}", on_sheet.len());
+    let bright = on_sheet
+        .iter()
+        .filter(|&&i| image.pixels[i].x > 0.5)
+        .count();
+    assert!(
+        bright <= on_sheet.len() / 100,
+        "{bright} of {} pixels",
+        on_sheet.len()
+    );
+}
+
 /// Objects passing through each other, and an occluder under its receiver:
 /// finite radiance in [0, L_s].
 #[test]

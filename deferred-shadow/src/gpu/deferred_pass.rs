@@ -11,7 +11,7 @@ use shadow_core::gpu::binding::{
 use shadow_core::gpu::buffer::{blank, upload};
 use shadow_core::gpu::depth::DEPTH_FORMAT;
 use shadow_core::gpu::wgsl::Source;
-use shadow_core::{Camera, raster::clip_from_world};
+use shadow_core::{Camera, raster::reversed_clip_from_world};
 
 use super::map_pass::MapPass;
 use super::scene::{Scene, pulled_pipeline, shader};
@@ -124,7 +124,8 @@ impl DeferredPass {
         let depth = wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
+            // Reversed depth (`reversed_clip_from_world`): nearer is greater.
+            depth_compare: Some(wgpu::CompareFunction::Greater),
             stencil: Default::default(),
             bias: Default::default(),
         };
@@ -270,7 +271,7 @@ impl DeferredPass {
     ) {
         let targets = &self.targets;
         let view = View {
-            clip_from_world: clip_from_world(camera, near),
+            clip_from_world: reversed_clip_from_world(camera, near),
         };
         let view = upload(ctx, "view", &[view], wgpu::BufferUsages::UNIFORM);
         let surface_group = group(
@@ -299,7 +300,7 @@ impl DeferredPass {
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &targets.depth,
                     depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
+                        load: wgpu::LoadOp::Clear(0.0),
                         store: wgpu::StoreOp::Discard,
                     }),
                     stencil_ops: None,

@@ -188,7 +188,9 @@ impl DeferredShadow {
             .ok_or_else(|| Error::stage(NAME, "a stage before prepare"))
     }
 
-    /// The near plane for `camera`: just short of the scene's bounds.
+    /// The near plane for `camera`: just short of the scene's bounds, or
+    /// 10⁻⁵ of the far distance from inside them, where the reversed depth
+    /// of the visible-surface pass keeps the far surfaces apart.
     fn near(&self, camera: &Camera) -> Result<f32> {
         let scene = self.prepared()?;
         let posed = self

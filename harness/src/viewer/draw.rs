@@ -294,7 +294,8 @@ impl Renderer {
             Content::Vertices(_) | Content::Background => 1.0,
         };
         let block = ViewBlock {
-            clip_from_world: reversed_clip_from_world(camera, near).to_cols_array_2d(),
+            clip_from_world: shadow_core::raster::reversed_clip_from_world(camera, near)
+                .to_cols_array_2d(),
             forward: forward.extend(exposure).to_array(),
             right: (right * half_w).extend(picture_scale).to_array(),
             up: (up * half_h).extend(0.0).to_array(),
@@ -389,19 +390,6 @@ impl Renderer {
             .expect("set above")
             .create_view(&Default::default())
     }
-}
-
-/// `shadow_core::raster::clip_from_world`'s x and y, so that the picture
-/// lines up with the rasterizer's and the reference's, with depth reversed
-/// (1 at `near`, falling toward 0 at infinity): 32-bit float depth then
-/// keeps its precision far from the eye, where surfaces a scene apart
-/// would otherwise fight.
-fn reversed_clip_from_world(camera: &Camera, near: f32) -> glam::Mat4 {
-    glam::camera::rh::proj::directx::perspective_infinite_reverse(
-        camera.fov_y,
-        camera.aspect(),
-        near,
-    ) * camera.view()
 }
 
 /// Writes `texels` (`Rgba32Float`, row 0 first) into `target`.

@@ -75,6 +75,19 @@ pub fn clip_from_world(camera: &Camera, near: f32) -> Mat4 {
         * camera.view()
 }
 
+/// [`clip_from_world`] with depth reversed: 1 at `near`, falling toward 0
+/// at infinity (x and y the same, so that images line up). With a 32-bit
+/// float depth buffer compared by `Greater`, depth keeps its precision far
+/// from the eye, where surfaces a scene apart, seen from inside it with the
+/// near plane close, would otherwise fight.
+pub fn reversed_clip_from_world(camera: &Camera, near: f32) -> Mat4 {
+    glam::camera::rh::proj::directx::perspective_infinite_reverse(
+        camera.fov_y,
+        camera.aspect(),
+        near,
+    ) * camera.view()
+}
+
 /// The near plane the rasterizer clips `frame` at: 10⁻⁵ of the distance
 /// from the camera's eye to the farthest corner of the frame's bounds. A GPU
 /// renderer drawing the same images takes it too.
