@@ -36,16 +36,16 @@ const ITERATIONS: usize = 24;
 
 /// Splits `environment` into `count` area lights.
 ///
-/// Fails with [`Error::InvalidConfig`] for a count of zero, more lights
-/// than the map has texels, or more than the copy the lights are placed on
-/// has: a map wider than 256 texels is relaxed on a copy 256 × 128
-/// texels, where each seed takes a texel of its own.
+/// Fails with [`Error::InvalidConfig`] for a count of zero or more lights
+/// than the copy the lights are placed on has texels, each seed taking one
+/// of its own: a map wider than 256 texels is relaxed on a copy 256 × 128
+/// texels, one narrower than 128 on its texels split into finer ones (so
+/// that a 16 × 8 map serves more than its 128 texels' worth of lights).
 pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLight>> {
-    let texels = environment.width() * environment.height();
-    if count == 0 || count > texels {
+    if count == 0 {
         return Err(Error::config(
             "deferred-shadow",
-            format!("{count} area lights for a {texels}-texel environment"),
+            "0 area lights: at least one is needed",
         ));
     }
     let work = if environment.width() > WORK_WIDTH {
@@ -288,8 +288,20 @@ mod tests {
             decompose(&env, 0),
             Err(Error::InvalidConfig { .. })
         ));
+        // A map narrower than 128 texels places its lights on finer texels:
+        // it serves more lights than it has texels (it refused them), up to
+        // the finer texels' count.
         let texels = env.width() * env.height();
-        assert!(decompose(&env, texels + 1).is_err());
+        assert!(env.width() < MIN_WIDTH);
+        let lights = decompose(&env, 2 * texels).unwrap();
+        assert!(lights.iter().all(|l| l.solid_angle > 0.0));
+        let omega: f32 = lights.iter().map(|l| l.solid_angle).sum();
+        assert_relative_eq!(omega, 4.0 * std::f32::consts::PI, max_relative = 1e-4);
+        let finer = Samples::of(&env).directions.len();
+        assert!(matches!(
+            decompose(&env, finer + 1),
+            Err(Error::InvalidConfig { .. })
+        ));
     }
 
     /// A map wider than the working copy has more texels than the copy the

@@ -38,7 +38,10 @@ use std::sync::Arc;
 
 use bytemuck::Zeroable;
 use glam::{Vec3, Vec4};
-use shadow_core::gpu::{GpuContext, buffer::upload};
+use shadow_core::gpu::{
+    GpuContext,
+    buffer::{storage_limit, upload},
+};
 use shadow_core::{Camera, Error, Result};
 
 use crate::config::MAX_LIGHTS;
@@ -88,6 +91,15 @@ impl Gpu {
             plan.maps.len(),
             2 * plan.ranges.len(),
             self.scene.triangle_count() as usize,
+            &self.ctx.device.limits(),
+        )
+    }
+
+    /// [`check_shading`] on this device.
+    pub fn check_shading(&self, lights: usize) -> Result<()> {
+        check_shading(
+            lights,
+            self.scene.vertex_count as u64,
             &self.ctx.device.limits(),
         )
     }
@@ -251,6 +263,26 @@ impl Gpu {
     pub fn vertex_count(&self) -> usize {
         self.scene.vertex_count as usize
     }
+}
+
+/// Refuses, before anything is computed, `lights` area lights whose
+/// per-vertex shading data for `vertices` vertices (L_s and a weight per
+/// light: (4 + q) `f32` each) does not fit one storage buffer of a device
+/// of `limits`, naming the setting, the bytes and the limit.
+pub fn check_shading(lights: usize, vertices: u64, limits: &wgpu::Limits) -> Result<()> {
+    let limit = storage_limit(limits);
+    let bytes = 4 * vertices * (4 + lights as u64);
+    if bytes > limit {
+        return Err(Error::config(
+            "deferred-shadow",
+            format!(
+                "q = {lights} area lights need {bytes} bytes of shading data for the \
+                 scene's {vertices} vertices ((4 + q) floats each), and the device binds at \
+                 most {limit} bytes in one storage buffer: fewer lights need fewer"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -246,3 +246,23 @@ fn plans_beyond_a_storage_binding_are_refused_by_name() {
         "{what}"
     );
 }
+
+/// The per-vertex shading data is checked against the device before it is
+/// made: (4 + q) floats a vertex, 2000 vertices under 256 lights 2.08 MB.
+#[test]
+fn shading_data_beyond_a_storage_binding_is_refused_by_name() {
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 1 << 20,
+        ..wgpu::Limits::default()
+    };
+    assert!(super::check_shading(32, 2000, &limits).is_ok());
+    let Err(shadow_core::Error::InvalidConfig { what, .. }) =
+        super::check_shading(256, 2000, &limits)
+    else {
+        panic!("accepted")
+    };
+    assert!(
+        what.contains("q = 256") && what.contains("2080000"),
+        "{what}"
+    );
+}

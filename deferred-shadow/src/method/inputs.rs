@@ -86,11 +86,16 @@ impl DeferredShadow {
         let poses = Self::poses_of(frame)?;
         let q = self.config.lights;
         let vertices = scene.gpu.vertex_count();
+        // v_s max(0, n·ω_i) per vertex and light, made once.
+        let weights = match self.posed {
+            None => Some(light_weights(vertices, q)?),
+            Some(_) => None,
+        };
         let posed = self.posed.get_or_insert_with(|| Posed {
             transforms: Vec::new(),
             rotations: Vec::new(),
             radiance: Vec::new(),
-            weights: vec![0.0; vertices * q],
+            weights: weights.unwrap_or_default(),
             weights_stale: Vec::new(),
             uploaded: None,
             maps_ready: false,
@@ -143,6 +148,25 @@ impl DeferredShadow {
             .collect();
         scene.gpu.set_objects(&objects)
     }
+}
+
+/// The light weights of `vertices` vertices under `q` lights, zeroed:
+/// refused, not aborted, where memory cannot hold them.
+fn light_weights(vertices: usize, q: usize) -> Result<Vec<f32>> {
+    let count = vertices.saturating_mul(q);
+    let mut weights = Vec::new();
+    weights.try_reserve_exact(count).map_err(|_| {
+        Error::config(
+            NAME,
+            format!(
+                "q = {q} area lights need {} bytes of light weights for the scene's \
+                 {vertices} vertices, more than this machine's memory gives",
+                (count as u64).saturating_mul(4)
+            ),
+        )
+    })?;
+    weights.resize(count, 0.0);
+    Ok(weights)
 }
 
 /// A rigid transform's rotation: refused, naming what is wrong, unless the
@@ -198,6 +222,17 @@ mod tests {
     /// Zero scale gave a NaN rotation, a shear with equal column lengths a
     /// non-unit quaternion (both panicked in the SH rotation), a mirror was
     /// called uneven scaling.
+    /// Light weights beyond memory are a configuration error, not an abort.
+    #[test]
+    fn light_weights_beyond_memory_are_refused() {
+        assert_eq!(light_weights(3, 2).unwrap(), vec![0.0; 6]);
+        let refused = light_weights(usize::MAX / 2, 256);
+        assert!(
+            matches!(refused, Err(Error::InvalidConfig { .. })),
+            "{refused:?}"
+        );
+    }
+
     #[test]
     fn poses_that_are_not_rigid_are_refused_by_what_they_are() {
         assert!(refusal(Affine3A::from_scale(Vec3::ZERO)).contains("zero scale"));

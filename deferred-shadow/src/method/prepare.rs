@@ -85,6 +85,7 @@ impl DeferredShadow {
             self.config.map_resolution,
             self.config.self_visibility,
         )?;
+        gpu.check_shading(self.config.lights)?;
         self.profile.seconds(
             Stage::Prepare,
             "pipelines and buffers",

@@ -40,7 +40,10 @@ impl DeferredShadow {
             .zip(&posed.radiance)
             .zip(&posed.transforms)
         {
-            match terms.as_ref().expect("refreshed with the lights") {
+            let terms = terms
+                .as_ref()
+                .ok_or_else(|| Error::stage(NAME, "shade or render before relight"))?;
+            match terms {
                 SelfRadiance::Diffuse(values) => out.extend_from_slice(values),
                 SelfRadiance::Glossy { vertices, specular } => {
                     let normal_matrix = Mat3::from(t.matrix3).inverse().transpose();
