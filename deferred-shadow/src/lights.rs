@@ -4,8 +4,9 @@
 //! region W_i (its spherical Voronoi cell) holds a share of the light and
 //! bright, small features get small regions. Each light carries its
 //! radiosity B_i = ∫_{W_i} L dω (eq. 4's normalization: a direction's
-//! radiance times its solid angle), its solid angle Ω_i and the direction
-//! ω_i at its luminance-weighted centroid.
+//! radiance times its solid angle), its solid angle Ω_i, the direction
+//! ω_i at its luminance-weighted centroid, and the extent its light comes
+//! from, which sets its penumbrae.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -20,6 +21,14 @@ pub struct AreaLight {
     pub radiosity: Vec3,
     /// Ω_i, steradians.
     pub solid_angle: f32,
+    /// The solid angle its light comes from, which sets the width of its
+    /// penumbrae (§4.2.2: the maps are blurred by the light's size): that
+    /// of the cap with the same power-weighted mean 1 − cos θ about ω_i,
+    /// 4π·E[1 − ω·ω_i] (exact for a uniform cap), at most Ω_i. A region
+    /// holding a sun and the sky around it blurs by the sun's size (its
+    /// cells around an 8° sun were up to 9 times its size); a region of even
+    /// radiance by its own.
+    pub extent: f32,
 }
 
 /// Relaxation runs on a copy of the map at most this many texels wide
@@ -80,6 +89,7 @@ pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLigh
             direction,
             radiosity: Vec3::ZERO,
             solid_angle: 0.0,
+            extent: 0.0,
         })
         .collect();
     let mut centroid = vec![Vec3::ZERO; count];
@@ -91,6 +101,25 @@ pub fn decompose(environment: &Environment, count: usize) -> Result<Vec<AreaLigh
     }
     for (light, c) in lights.iter_mut().zip(centroid) {
         light.direction = c.try_normalize().unwrap_or(light.direction);
+    }
+    // The power-weighted mean of 1 − cos θ about each direction.
+    let mut spread = vec![(0.0f64, 0.0f64); count];
+    for (t, &r) in regions.iter().enumerate() {
+        let power = (luminance(full.radiance[t]).max(0.0) * full.solid_angle[t]) as f64;
+        // A texel's own spread, as a cap of its solid angle, plus its
+        // offset (the parallel-axis rule, to first order).
+        let own = full.solid_angle[t] / (4.0 * std::f32::consts::PI);
+        let off = (1.0 - full.directions[t].dot(lights[r as usize].direction)).max(0.0);
+        spread[r as usize].0 += power * (off + own) as f64;
+        spread[r as usize].1 += power;
+    }
+    for (light, (moment, power)) in lights.iter_mut().zip(spread) {
+        let cap = 4.0 * std::f64::consts::PI * moment / power;
+        light.extent = if power > 0.0 && cap.is_finite() {
+            (cap as f32).min(light.solid_angle)
+        } else {
+            light.solid_angle
+        };
     }
     Ok(lights)
 }
@@ -235,6 +264,43 @@ mod tests {
         }
     }
 
+    /// A sun 8.4° across (0.0169 sr, radiance 500) in a sky of 0.1, in 32
+    /// lights: the cells around the sun also hold sky, up to 9 times the
+    /// sun's solid angle (measured 0.157 sr), and blurred their shadows by
+    /// all of it; their extents are the sun's (measured at most 0.0116 sr).
+    #[test]
+    fn the_cells_of_a_sun_blur_by_the_suns_size() {
+        let (w, h) = (128, 64);
+        let sun = Vec3::new(1.0, 1.0, 0.0).normalize();
+        let radius = 4.2f32.to_radians();
+        let texels = (0..w * h)
+            .map(|i| {
+                let theta = std::f32::consts::PI * ((i / w) as f32 + 0.5) / h as f32;
+                let phi = std::f32::consts::TAU * ((i % w) as f32 + 0.5) / w as f32;
+                let d = shadow_core::environment::direction_from_angles(theta, phi);
+                Vec3::splat(if d.dot(sun) > radius.cos() {
+                    500.0
+                } else {
+                    0.1
+                })
+            })
+            .collect();
+        let env = Environment::new("sun", w, h, texels).unwrap();
+        let disc = std::f32::consts::TAU * (1.0 - radius.cos());
+        let lights = decompose(&env, 32).unwrap();
+        let at_sun: Vec<&AreaLight> = (lights.iter())
+            .filter(|l| l.direction.dot(sun) > radius.cos())
+            .collect();
+        assert!(!at_sun.is_empty());
+        assert!(
+            at_sun.iter().any(|l| l.solid_angle > 4.0 * disc),
+            "{at_sun:?}"
+        );
+        for light in at_sun {
+            assert!(light.extent <= disc, "{light:?} against {disc} sr");
+        }
+    }
+
     #[test]
     fn bright_features_get_small_regions() {
         let env = sunny();
@@ -247,12 +313,19 @@ mod tests {
         let mean = 4.0 * std::f32::consts::PI / 32.0;
         assert!(at_sun.solid_angle < 0.2 * mean, "{} sr", at_sun.solid_angle);
         assert!(at_sun.direction.dot(sun) > 0.99);
+        // Its light comes from within the sun's 3 × 3 texels.
+        let disc: f32 = (10..13).map(|row| 3.0 * env.solid_angle(row)).sum();
+        assert!(at_sun.extent <= at_sun.solid_angle.min(disc), "{at_sun:?}");
         // A uniform sky gets regions of similar size.
         let even = decompose(&Environment::uniform(Vec3::ONE), 32).unwrap();
         let (lo, hi) = even.iter().fold((f32::MAX, 0.0f32), |(lo, hi), l| {
             (lo.min(l.solid_angle), hi.max(l.solid_angle))
         });
         assert!(hi / lo < 1.6, "{lo} .. {hi}");
+        // And each light's extent is nearly its cell.
+        for light in &even {
+            assert!(light.extent > 0.8 * light.solid_angle, "{light:?}");
+        }
     }
 
     proptest::proptest! {

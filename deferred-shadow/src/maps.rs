@@ -58,7 +58,8 @@ use crate::lights::AreaLight;
 
 shadow_core::wgsl_struct! {
     /// An area light W_i (§4.2.1) as the shaders read it: direction ω_i (w:
-    /// solid angle Ω_i), radiosity B_i, and the axes (u, v) of planes
+    /// the extent its light comes from, [`AreaLight::extent`], which sets
+    /// the blur), radiosity B_i, and the axes (u, v) of planes
     /// perpendicular to ω_i.
     #[repr(C)]
     #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
@@ -74,7 +75,7 @@ impl GpuLight {
     pub fn new(light: &AreaLight) -> GpuLight {
         let (u, v) = light.direction.any_orthonormal_pair();
         GpuLight {
-            direction: light.direction.extend(light.solid_angle),
+            direction: light.direction.extend(light.extent),
             radiosity: light.radiosity.extend(0.0),
             u: u.extend(0.0),
             v: v.extend(0.0),
@@ -376,6 +377,7 @@ mod tests {
             direction: direction.normalize(),
             radiosity: Vec3::ONE,
             solid_angle,
+            extent: solid_angle,
         })
     }
 

@@ -67,6 +67,7 @@ fn the_blur_ramp_across_a_sheet_edge_is_s_wide() {
         direction: Vec3::Y,
         radiosity: Vec3::ONE,
         solid_angle: omega,
+        extent: omega,
     });
     let (u, v) = (light.u.truncate(), light.v.truncate());
     // The sheet covers u ∈ [−2, 0], v ∈ [−1, 1].
@@ -147,6 +148,7 @@ fn the_penumbra_widens_away_from_the_contact() {
             direction,
             radiosity: Vec3::ONE,
             solid_angle: omega,
+            extent: omega,
         })
     };
     let plate = shapes::grid(

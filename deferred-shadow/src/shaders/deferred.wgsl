@@ -119,15 +119,21 @@ fn shade(object: u32, p: vec3<f32>, n: vec3<f32>, ls: vec3<f32>, corners: vec3<u
             continue;
         }
         let light = lights[i];
+        var w = max(dot(n, light.direction.xyz), 0.0);
+        if params.self_visibility != 0u {
+            w = bary.x * weight(corners.x, i) + bary.y * weight(corners.y, i) + bary.z * weight(corners.z, i);
+        }
+        // A light behind the surface or blocked by the object itself takes
+        // nothing away however occluded: its maps are not read (about half
+        // the lights at any point).
+        if w <= 0.0 {
+            continue;
+        }
         var mask = 0xffffffffu;
         if triangle != 0xffffffffu {
             mask = culling[params.masks + triangle * q + i];
         }
         let occluded = occlusion(receiver, i, p, light, mask);
-        var w = max(dot(n, light.direction.xyz), 0.0);
-        if params.self_visibility != 0u {
-            w = bary.x * weight(corners.x, i) + bary.y * weight(corners.y, i) + bary.z * weight(corners.z, i);
-        }
         lost += light.radiosity.xyz * brdf(o, n, light.direction.xyz, wo) * (w * occluded);
     }
     return max(ls - lost, vec3<f32>(0.0));
