@@ -194,6 +194,20 @@ impl Contacts {
                 })
     }
 
+    /// Per vertex of the frame, objects one after another, whether it is
+    /// enclosed ([`Contacts::enclosed`]): the rule a method that does not
+    /// trace the reference's rays takes for the receivers that see nothing.
+    pub fn enclosed_vertices(&self) -> Vec<bool> {
+        use rayon::prelude::*;
+        let vertices: Vec<(usize, usize)> = (self.objects.iter().enumerate())
+            .flat_map(|(o, s)| (0..s.positions.len()).map(move |v| (o, v)))
+            .collect();
+        vertices
+            .par_iter()
+            .map(|&(o, v)| self.enclosed(o, v))
+            .collect()
+    }
+
     /// How far vertex `vertex` of object `object` can move along its normal
     /// before it meets another object's surface (either side), up to
     /// `reach` (world units): a method that moves tested vertices off their

@@ -5,6 +5,33 @@ use std::f32::consts::{PI, TAU};
 use crate::{Error, Mesh, Result};
 use glam::{Vec2, Vec3};
 
+/// A closed sphere: a lathed semicircle of `rings` rings and `segments`
+/// segments, one vertex per pole and the seam shared, so that it has no
+/// boundary edge ([`Mesh::is_closed`]; a [`uv_sphere`] repeats its seam and
+/// poles). Area-weighted normals.
+pub fn closed_sphere(
+    name: &str,
+    center: Vec3,
+    radius: f32,
+    rings: u32,
+    segments: u32,
+) -> Result<Mesh> {
+    let profile: Vec<Vec2> = (0..=rings)
+        .map(|k| {
+            let theta = PI * k as f32 / rings as f32;
+            let x = if k == 0 || k == rings {
+                0.0
+            } else {
+                theta.sin()
+            };
+            Vec2::new(x, -theta.cos()) * radius
+        })
+        .collect();
+    let mesh = lathe(name, &profile, segments)?;
+    let positions = mesh.positions().iter().map(|p| *p + center).collect();
+    mesh.with_pose(positions, Some(mesh.normals().to_vec()))
+}
+
 /// A UV sphere with outward normals (analytic, not area-weighted).
 pub fn uv_sphere(name: &str, center: Vec3, radius: f32, rings: u32, segments: u32) -> Result<Mesh> {
     let mut positions = Vec::new();

@@ -4,7 +4,9 @@
 use std::time::Instant;
 
 use glam::{Affine3A, Mat3, Mat4, Quat};
-use shadow_core::{Capability, Environment, Error, FrameGeometry, Result, Stage};
+use shadow_core::{
+    Capability, Environment, Error, FrameGeometry, Result, Stage, contact::Contacts,
+};
 
 use super::refresh::world_bounds;
 use super::{DeferredShadow, Lit, Posed};
@@ -97,6 +99,7 @@ impl DeferredShadow {
             radiance: Vec::new(),
             weights: weights.unwrap_or_default(),
             weights_stale: Vec::new(),
+            enclosed: Vec::new(),
             uploaded: None,
             maps_ready: false,
             planned: None,
@@ -120,6 +123,22 @@ impl DeferredShadow {
         posed.rotations = poses.iter().map(|p| p.1).collect();
         if moved {
             posed.maps_ready = false;
+            // Vertices pressed on another object or buried in a closed one
+            // receive nothing, as the reference has it (shadow-core's
+            // `contact`): objects in one group cast no maps on each other,
+            // and the paper has no rule for one sunk into another.
+            let start = Instant::now();
+            let closed: Vec<bool> = scene.parts.iter().map(|p| p.mesh.is_closed()).collect();
+            let enclosed = Contacts::new(frame, &closed)?.enclosed_vertices();
+            if enclosed != posed.enclosed {
+                posed.enclosed = enclosed;
+                posed.uploaded = None;
+            }
+            self.profile.seconds(
+                Stage::Update,
+                "pressed and buried vertices (CPU)",
+                start.elapsed().as_secs_f64(),
+            );
             // The groups follow the poses (§4.2.3 clusters the occluders
             // that are near each other, wherever they are now): objects
             // that came together or apart are regrouped, and no map of the

@@ -110,6 +110,9 @@ struct Posed {
     /// Per vertex and light, v_s max(0, n·ω_i); stale objects are redone.
     weights: Vec<f32>,
     weights_stale: Vec<bool>,
+    /// Per vertex, pressed on another object or buried in a closed one: it
+    /// receives nothing (the vertex pass gives it 0).
+    enclosed: Vec<bool>,
     /// The eye the GPU's per-vertex shading data was last written for;
     /// `None` when it is stale.
     uploaded: Option<Vec3>,

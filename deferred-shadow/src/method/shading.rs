@@ -63,12 +63,15 @@ impl DeferredShadow {
         }
         let stride = 4 + q;
         let mut shading = vec![0.0f32; out.len() * stride];
-        for ((dst, ls), w) in shading
+        for (v, ((dst, ls), w)) in shading
             .chunks_exact_mut(stride)
             .zip(&out)
             .zip(posed.weights.chunks_exact(q))
+            .enumerate()
         {
             dst[..3].copy_from_slice(&ls.to_array());
+            // Enclosed: the vertex pass gives it 0 (deferred.wgsl).
+            dst[3] = f32::from(u8::from(posed.enclosed.get(v).copied().unwrap_or(false)));
             dst[4..].copy_from_slice(w);
         }
         scene.gpu.set_shading(&shading)?;

@@ -20,7 +20,8 @@
 // window the triangle's projection touches (bit 31: the 32nd and later).
 @group(0) @binding(6) var<storage, read> culling: array<u32>;
 @group(0) @binding(7) var<storage, read> blurred: array<f32>;
-// Per vertex: L_s (rgb, and a pad), then v_s max(0, n·ω_i) per light.
+// Per vertex: L_s (rgb), 1 where the vertex is enclosed (pressed or
+// buried: it receives nothing) else 0, then v_s max(0, n·ω_i) per light.
 @group(0) @binding(8) var<storage, read> shading: array<f32>;
 @group(0) @binding(9) var gbuffer: texture_2d<u32>;
 @group(0) @binding(10) var image: texture_storage_2d<rgba32float, write>;
@@ -37,6 +38,10 @@ fn world_normal(o: GpuObject, v: u32) -> vec3<f32> {
 fn self_radiance(v: u32) -> vec3<f32> {
     let base = v * params.stride;
     return vec3<f32>(shading[base], shading[base + 1u], shading[base + 2u]);
+}
+
+fn enclosed(v: u32) -> bool {
+    return shading[v * params.stride + 3u] != 0.0;
 }
 
 fn weight(v: u32, i: u32) -> f32 {
@@ -184,5 +189,11 @@ fn at_vertices(@builtin(global_invocation_id) gid: vec3<u32>) {
     let o = objects[object];
     let p = world_position(o, v);
     let n = normalize(world_normal(o, v));
+    // A vertex pressed on another object or buried in a closed one receives
+    // nothing; no visible point is, so the pixels ignore the flag.
+    if enclosed(v) {
+        vertex_radiance[v] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        return;
+    }
     vertex_radiance[v] = vec4<f32>(shade(object, p, n, self_radiance(v), vec3<u32>(v), vec3<f32>(1.0, 0.0, 0.0), 0xffffffffu), 1.0);
 }

@@ -26,15 +26,7 @@ use crate::name::NAME;
 /// rule ([`shadow_core::contact`]), which a frame without another object
 /// near each vertex skips.
 fn enclosed(frame: &FrameGeometry, cull: &[bool]) -> Result<Vec<bool>> {
-    use rayon::prelude::*;
-    let contacts = shadow_core::contact::Contacts::new(frame, cull)?;
-    let vertices: Vec<(usize, usize)> = (frame.objects.iter().enumerate())
-        .flat_map(|(o, object)| (0..object.vertex_count()).map(move |v| (o, v)))
-        .collect();
-    Ok(vertices
-        .par_iter()
-        .map(|&(o, v)| contacts.enclosed(o, v))
-        .collect())
+    Ok(shadow_core::contact::Contacts::new(frame, cull)?.enclosed_vertices())
 }
 
 /// Kautz, Lehtinen and Aila 2004: per vertex, the blocker triangles of the

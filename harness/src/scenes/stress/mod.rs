@@ -7,13 +7,9 @@
 //! takes seconds, and comes with the environment it is meant to be seen
 //! under. Only `interpenetrating` moves (4 frames); the others have 1.
 
-use std::{
-    collections::HashMap,
-    f32::consts::{PI, TAU},
-    sync::Arc,
-};
+use std::{collections::HashMap, f32::consts::TAU, sync::Arc};
 
-use glam::{Affine3A, Vec2, Vec3};
+use glam::{Affine3A, Vec3};
 use shadow_core::{
     Camera, Environment, Frame, Mesh, Object, Pose, Result, Scene, environment::luminance, shapes,
 };
@@ -511,24 +507,9 @@ fn closed_box(name: &str, min: Vec3, max: Vec3, cells: [u32; 3]) -> Result<Mesh>
     Mesh::new(name, positions, None, triangles)
 }
 
-/// A closed sphere (a lathed semicircle: one vertex per pole, the seam
-/// shared) of 16 rings and 32 segments, 482 vertices.
+/// A closed sphere of 16 rings and 32 segments, 482 vertices.
 fn sphere(name: &str, center: Vec3, radius: f32) -> Result<Mesh> {
-    let rings = 16;
-    let profile: Vec<Vec2> = (0..=rings)
-        .map(|k| {
-            let theta = PI * k as f32 / rings as f32;
-            let x = if k == 0 || k == rings {
-                0.0
-            } else {
-                theta.sin()
-            };
-            Vec2::new(x, -theta.cos()) * radius
-        })
-        .collect();
-    let mesh = shapes::lathe(name, &profile, 32)?;
-    let positions = mesh.positions().iter().map(|p| *p + center).collect();
-    mesh.with_pose(positions, Some(mesh.normals().to_vec()))
+    shapes::closed_sphere(name, center, radius, 16, 32)
 }
 
 /// One mesh of several, each part keeping its vertices and normals.
