@@ -184,8 +184,10 @@ fn cup() -> shadow_core::Mesh {
 }
 
 /// A turned object shades as the unturned one under the environment turned
-/// the other way: the lighting is rotated into the object's frame, the
-/// transfer is not recomputed.
+/// the other way: the lighting and the light weights are rotated into the
+/// object's frame, the transfer is not recomputed. Four posts around the
+/// cup, which the quarter turn maps onto each other, take light from it
+/// through the maps, so that its turned light weights count.
 #[test]
 #[cfg_attr(
     skip_gpu_tests,
@@ -194,21 +196,37 @@ fn cup() -> shadow_core::Mesh {
 fn turning_an_object_turns_its_lighting() {
     let ctx = test_context();
     let turn = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
-    let object = Object {
-        mesh: Arc::new(cup()),
-        material: white(),
+    let post = |x: f32, z: f32| {
+        let at = Vec3::new(x, 0.0, z);
+        let half = Vec3::new(0.1, 0.0, 0.1);
+        shapes::cuboid("post", at - half, at + half + Vec3::Y * 0.6, false).unwrap()
     };
+    let meshes = [
+        cup(),
+        post(0.7, 0.0),
+        post(0.0, 0.7),
+        post(-0.7, 0.0),
+        post(0.0, -0.7),
+    ];
+    let objects: Vec<Object> = (meshes.into_iter())
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: white(),
+        })
+        .collect();
+    let still_posts = vec![Pose::Rigid(Affine3A::IDENTITY); 4];
+    let poses = |cup: Affine3A| [vec![Pose::Rigid(cup)], still_posts.clone()].concat();
     let scene = Scene::new(
         "turning cup",
-        vec![object],
+        objects,
         vec![
             Frame {
                 time: 0.0,
-                poses: vec![Pose::Rigid(Affine3A::IDENTITY)],
+                poses: poses(Affine3A::IDENTITY),
             },
             Frame {
                 time: 1.0,
-                poses: vec![Pose::Rigid(Affine3A::from_quat(turn))],
+                poses: poses(Affine3A::from_quat(turn)),
             },
         ],
         camera(),
@@ -225,7 +243,8 @@ fn turning_an_object_turns_its_lighting() {
     method
         .update(&scene.frame_geometry(1).unwrap(), scene.camera())
         .unwrap();
-    let turned: Vec<Vec3> = method.shade(scene.camera().eye).unwrap().flat().collect();
+    let turned = method.shade(scene.camera().eye).unwrap().radiance[0].clone();
+    assert!(method.map_count().unwrap() > 0);
     // The transfer is the one prepare traced: the same wall-clock seconds
     // and bytes (a new trace would take other seconds), and no other stage
     // traced one.
@@ -253,10 +272,13 @@ fn turning_an_object_turns_its_lighting() {
     still
         .update(&scene.frame_geometry(0).unwrap(), scene.camera())
         .unwrap();
-    let expected: Vec<Vec3> = still.shade(scene.camera().eye).unwrap().flat().collect();
+    let expected = still.shade(scene.camera().eye).unwrap().radiance[0].clone();
     let scale = expected.iter().map(|v| v.x).fold(0.0, f32::max);
+    // Within 5% of the brightest vertex: measured 2.6% (the lights of the
+    // turned map are found anew, and their maps' texel grids turn with
+    // them); light weights left unturned gave 21%.
     for (a, b) in turned.iter().zip(&expected) {
-        assert!((*a - *b).abs().max_element() < 0.02 * scale, "{a} vs {b}");
+        assert!((*a - *b).abs().max_element() < 0.05 * scale, "{a} vs {b}");
     }
 }
 

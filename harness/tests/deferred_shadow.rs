@@ -228,7 +228,8 @@ fn overlapping_occluders_combine_as_a_product_of_visibilities() {
 }
 
 /// §7.1's finding, checked on the bunny: the error for 16, 32 and 64 lights
-/// and maps of 32², 64² and 128².
+/// and maps of 32², 64² and 128² (the README's table), where the lights
+/// matter more than the maps.
 #[test]
 #[cfg_attr(
     skip_gpu_tests,
@@ -262,7 +263,23 @@ fn map_resolution_against_the_number_of_lights() {
         );
         table.push(row);
     }
-    assert!(table[2][2] < table[0][0], "{table:?}");
+    // The README's conclusion: at every map size four times the lights
+    // gain more than four times the texels a side at any number of lights
+    // (measured: lights 1.22, 1.06, 0.80 points; texels 0.55, 0.39, 0.13),
+    // and more lights never cost accuracy.
+    let light_gain = (0..3)
+        .map(|m| table[0][m] - table[2][m])
+        .fold(f32::MAX, f32::min);
+    let map_gain = (0..3)
+        .map(|q| table[q][0] - table[q][2])
+        .fold(f32::MIN, f32::max);
+    assert!(light_gain > map_gain, "{table:?}");
+    for m in 0..3 {
+        assert!(
+            table[0][m] > table[1][m] && table[1][m] > table[2][m],
+            "{table:?}"
+        );
+    }
 }
 
 /// The white furnace through the harness's own scene.
