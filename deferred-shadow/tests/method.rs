@@ -170,6 +170,62 @@ fn phong_of_exponent_zero_shades_as_its_constant_lobe() {
     assert!(relative < 0.06, "{relative}");
 }
 
+/// Forty cubes hovering over a floor under a sun overhead, each its own
+/// occluder group: the floor reads 40 maps per light, the 32nd and later
+/// through the mask's last bit. The floor under every cube is in shadow.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn more_than_32_maps_for_one_receiver_and_light_all_cast() {
+    let ctx = test_context();
+    let floor = shapes::floor("floor", Vec3::ZERO, 2.0, 40).unwrap();
+    let centres: Vec<Vec3> = (0..40)
+        .map(|i| {
+            Vec3::new(
+                -1.6 + 0.4 * (i % 8) as f32,
+                0.2,
+                -0.8 + 0.4 * (i / 8) as f32,
+            )
+        })
+        .collect();
+    let half = Vec3::new(0.06, 0.05, 0.06);
+    let mut meshes = vec![floor.clone()];
+    meshes.extend(
+        (centres.iter()).map(|&c| shapes::cuboid("cube", c - half, c + half, false).unwrap()),
+    );
+    let objects = (meshes.into_iter())
+        .map(|mesh| Object {
+            mesh: Arc::new(mesh),
+            material: white(),
+        })
+        .collect();
+    let scene = Scene::still("forty cubes", objects, camera()).unwrap();
+    let config = Config {
+        lights: 8,
+        ..Config::default()
+    };
+    let mut method = DeferredShadow::new(ctx, config).unwrap();
+    run(&mut method, &scene, &sunny(Vec3::Y));
+    assert_eq!(method.groups().unwrap().iter().max(), Some(&40));
+    let floor_radiance = &method.shade(scene.camera().eye).unwrap().radiance[0];
+    let at = |x: f32, z: f32| {
+        let v = (floor.positions().iter())
+            .position(|p| (p.x - x).abs() < 1e-3 && (p.z - z).abs() < 1e-3)
+            .unwrap();
+        floor_radiance[v].x
+    };
+    let open = at(1.9, 1.9);
+    for (i, c) in centres.iter().enumerate() {
+        let under = at(c.x, c.z);
+        assert!(
+            under < 0.5 * open,
+            "cube {i} at {c}: {under} under it, {open} in the open"
+        );
+    }
+}
+
 /// A cup: turned, open at the top, so that it shadows its own inside.
 fn cup() -> shadow_core::Mesh {
     let profile = [
