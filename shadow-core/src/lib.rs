@@ -30,6 +30,8 @@ pub mod triangle;
 pub mod bvh;
 #[cfg(feature = "gpu")]
 pub mod gpu;
+#[cfg(feature = "simplify")]
+pub mod simplify;
 
 pub use brdf::{Brdf, reflect};
 pub use camera::Camera;

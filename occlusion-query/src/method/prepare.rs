@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use glam::{Mat3, Vec3, Vec4};
-use shadow_core::{Brdf, Mesh, Pose, Result, Scene, ShadowMethod, Stage};
+use shadow_core::{Brdf, Mesh, Pose, Result, Scene, ShadowMethod, Stage, simplify};
 
 use super::update::regions_of;
 use super::{Gpu, OcclusionQuery, Prepared};
@@ -55,7 +55,7 @@ impl OcclusionQuery {
                         Some(_) => 1.0,
                         None => occluder::stretch(mesh, &first_frame.objects[o]),
                     };
-                    let simplified = occluder::simplified(mesh, texels * texel(o) / stretch)?;
+                    let simplified = simplify::simplified(mesh, texels * texel(o) / stretch)?;
                     simplification = simplification.max(simplified.error * stretch);
                     simplified.triangles
                 }
