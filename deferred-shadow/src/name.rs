@@ -24,6 +24,7 @@ pub const OPTIONS: &[&str] = &[
     "groups=0+1,2",
     "uncorrected",
     "window=none|hanning|lanczos",
+    "blocks",
 ];
 
 impl Config {
@@ -33,7 +34,8 @@ impl Config {
     /// `overlap=F` (objects whose boxes overlap by more than F form a group)
     /// or `groups=0+1,2` (object indices, `+` within a group, `,` between
     /// groups), `uncorrected` (eq. 4 instead of eq. 8),
-    /// `window=none|hanning|lanczos`.
+    /// `window=none|hanning|lanczos`, `blocks` (L_o shared by 2×2 blocks
+    /// of pixels, [`Config::blocks`]).
     ///
     /// Fails with [`shadow_core::Error::InvalidConfig`] naming the option
     /// (and the closest valid one for a typo) or the setting out of range.
@@ -60,11 +62,9 @@ impl Config {
                 Grouping::Explicit(groups) => name.value("groups", groups_name(groups)),
             };
         }
-        name.switch("uncorrected", !self.self_visibility).changed(
-            "window",
-            self.window.name(),
-            default.window.name(),
-        );
+        name.switch("uncorrected", !self.self_visibility)
+            .changed("window", self.window.name(), default.window.name())
+            .switch("blocks", self.blocks);
         name.finish()
     }
 }
@@ -94,6 +94,7 @@ fn read(name: &MethodName, option: Opt, config: &mut Config) -> Result<()> {
             )
         }
         ("uncorrected", None) => config.self_visibility = false,
+        ("blocks", None) => config.blocks = true,
         ("window", Some(w)) => {
             config.window = Window::from_name(w).ok_or_else(|| {
                 name.error(format!("{option}: windows are none, hanning, lanczos"))
@@ -131,11 +132,12 @@ mod tests {
             lights: 64,
             grouping: Grouping::Explicit(vec![vec![0, 2], vec![1]]),
             self_visibility: false,
+            blocks: true,
             ..Config::default()
         };
         assert_eq!(
             config.name(),
-            "deferred-shadow:q=64:groups=0+2,1:uncorrected"
+            "deferred-shadow:q=64:groups=0+2,1:uncorrected:blocks"
         );
     }
 
@@ -167,15 +169,19 @@ mod tests {
             grouping,
             any::<bool>(),
             prop::sample::select(vec![Window::None, Window::Hanning, Window::Lanczos]),
+            any::<bool>(),
         )
             .prop_map(
-                |(lights, map_resolution, rays, grouping, self_visibility, window)| Config {
-                    lights,
-                    map_resolution,
-                    rays,
-                    grouping,
-                    self_visibility,
-                    window,
+                |(lights, map_resolution, rays, grouping, self_visibility, window, blocks)| {
+                    Config {
+                        lights,
+                        map_resolution,
+                        rays,
+                        grouping,
+                        self_visibility,
+                        window,
+                        blocks,
+                    }
                 },
             )
     }

@@ -80,11 +80,11 @@ fn maps_beyond_the_device_limit_are_refused_by_name() {
     let limit = 1 << 20;
     let ctx = limited_test_context(|l| l.max_storage_buffer_binding_size = limit);
     let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
-    // 32 lights and 128² maps (64 KiB each): more than the 16 maps 1 MiB
-    // holds on this scene.
+    // 128 lights and maps of up to 256² texels: more than 1 MiB of maps
+    // on this scene (the message names the bytes).
     let config = Config {
-        lights: 32,
-        map_resolution: 128,
+        lights: 128,
+        map_resolution: 256,
         ..Config::default()
     };
     let mut method = DeferredShadow::new(Arc::clone(&ctx), config).unwrap();
@@ -92,7 +92,7 @@ fn maps_beyond_the_device_limit_are_refused_by_name() {
     let Err(Error::InvalidConfig { what, .. }) = refused else {
         panic!("{refused:?}")
     };
-    for named in ["q = 32", "128×128", &format!("{limit} bytes")] {
+    for named in ["q = 128", "256×256", &format!("{limit} bytes")] {
         assert!(what.contains(named), "{named:?} not in {what:?}");
     }
     let fits = Config {
@@ -231,4 +231,33 @@ fn most_apart(a: &[Vec4], b: &[Vec4]) -> f32 {
         .zip(b)
         .map(|(a, b)| (*a - *b).abs().max_element())
         .fold(0.0, f32::max)
+}
+
+/// A device whose widest texture holds 2 × 2 tiles of 64² draws a plan's
+/// maps in atlas batches of four: the image is the one a device with room
+/// for all of them in one batch gives.
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn maps_in_many_atlas_batches_match_one_batch() {
+    let scene = ball_on_floor(Brdf::lambert(Vec3::splat(0.8)).unwrap());
+    let image = |ctx| {
+        let mut method = DeferredShadow::new(ctx, Config::default()).unwrap();
+        run(&mut method, &scene, &patchy()).unwrap();
+        (
+            method.map_count().unwrap(),
+            method.render(scene.camera()).unwrap(),
+        )
+    };
+    let (maps, one) = image(test_context());
+    let (same, batched) = image(limited_test_context(|l| l.max_texture_dimension_2d = 128));
+    assert_eq!(maps, same);
+    assert!(maps > 8, "{maps} maps: at least three batches of four");
+    let brightest = (one.pixels.iter()).fold(0.0f32, |m, p| m.max(p.max_element()));
+    let worst = (one.pixels.iter().zip(&batched.pixels))
+        .map(|(a, b)| (*a - *b).abs().max_element())
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 1e-5 * brightest, "{worst} of {brightest}");
 }

@@ -250,10 +250,14 @@ impl Suite {
             },
             Sweep {
                 family: "deferred-shadow",
-                parameter: "area lights q, map side",
+                parameter: "area lights q, map side, L_o shared by 2×2 blocks",
                 methods: pick(
                     &["deferred-shadow:q=8", "deferred-shadow"],
-                    &["deferred-shadow:q=128", "deferred-shadow:map=128"],
+                    &[
+                        "deferred-shadow:q=128",
+                        "deferred-shadow:map=128",
+                        "deferred-shadow:blocks",
+                    ],
                     &["deferred-shadow:q=256"],
                 ),
             },

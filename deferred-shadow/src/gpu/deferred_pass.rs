@@ -15,6 +15,7 @@ use shadow_core::{Camera, raster::reversed_clip_from_world};
 
 use super::map_pass::MapPass;
 use super::scene::{Scene, pulled_pipeline, shader};
+use crate::Config;
 
 shadow_core::wgsl_struct! {
     /// A recording's parameters of the deferred pass, as deferred.wgsl
@@ -24,7 +25,6 @@ shadow_core::wgsl_struct! {
     struct Params {
         eye: Vec4,
         lights: u32,
-        resolution: u32,
         self_visibility: u32,
         vertices: u32,
         width: u32,
@@ -34,6 +34,9 @@ shadow_core::wgsl_struct! {
         stride: u32,
         /// Where the triangles' masks start in `culling`.
         masks: u32,
+        /// 1: the outgoing light's loss is evaluated per 2×2 block of
+        /// pixels and shared ([`Config::blocks`]).
+        blocks: u32,
     }
 }
 
@@ -60,6 +63,13 @@ pub(super) struct Targets {
     surface: wgpu::TextureView,
     depth: wgpu::TextureView,
     image: wgpu::Texture,
+    /// deferred.wgsl's `Block` (two `vec4`) per 2×2 block of pixels.
+    blocks: wgpu::Buffer,
+}
+
+/// Blocks of 2×2 pixels across and down an image.
+fn blocks(width: u32, height: u32) -> (u32, u32) {
+    (width.div_ceil(2), height.div_ceil(2))
 }
 
 impl Targets {
@@ -84,6 +94,15 @@ impl Targets {
                     | wgpu::TextureUsages::TEXTURE_BINDING
                     | wgpu::TextureUsages::COPY_SRC,
             ),
+            blocks: {
+                let (wide, high) = blocks(width, height);
+                blank(
+                    ctx,
+                    "blocks",
+                    32 * u64::from(wide) * u64::from(high),
+                    wgpu::BufferUsages::STORAGE,
+                )
+            },
         }
     }
 }
@@ -93,6 +112,8 @@ impl Targets {
 pub(super) struct DeferredPass {
     surface: wgpu::RenderPipeline,
     surface_layout: wgpu::BindGroupLayout,
+    /// L_o at one pixel of each 2×2 block, then the pixels.
+    blocks: wgpu::ComputePipeline,
     pixels: wgpu::ComputePipeline,
     vertices: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
@@ -101,10 +122,12 @@ pub(super) struct DeferredPass {
     /// The image's targets (1×1 until an image is recorded).
     targets: Targets,
     self_visibility: bool,
+    /// [`Config::blocks`].
+    blocks_on: bool,
 }
 
 impl DeferredPass {
-    pub fn new(ctx: &GpuContext, vertex_count: u32, self_visibility: bool) -> DeferredPass {
+    pub fn new(ctx: &GpuContext, vertex_count: u32, config: &Config) -> DeferredPass {
         let vertex = wgpu::ShaderStages::VERTEX;
         let cs = wgpu::ShaderStages::COMPUTE;
         let surface_body = Source::new()
@@ -157,6 +180,7 @@ impl DeferredPass {
         DeferredPass {
             surface,
             surface_layout,
+            blocks: compute_pipeline(ctx, &layout, &module, "at_blocks"),
             pixels: compute_pipeline(ctx, &layout, &module, "at_pixels"),
             vertices: compute_pipeline(ctx, &layout, &module, "at_vertices"),
             layout,
@@ -167,7 +191,8 @@ impl DeferredPass {
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             ),
             targets: Targets::new(ctx, 1, 1),
-            self_visibility,
+            self_visibility: config.self_visibility,
+            blocks_on: config.blocks,
         }
     }
 
@@ -198,18 +223,18 @@ impl DeferredPass {
         scene: &Scene,
         maps: &MapPass,
         eye: Vec3,
-        (width, height): (u32, u32),
+        (width, height, pixel_angle): (u32, u32, f32),
     ) -> wgpu::BindGroup {
         let params = Params {
-            eye: eye.extend(1.0),
+            eye: eye.extend(pixel_angle),
             lights: scene.light_count,
-            resolution: maps.resolution(),
             self_visibility: self.self_visibility as u32,
             vertices: scene.vertex_count,
             width,
             height,
             stride: 4 + scene.light_count,
             masks: maps.masks_offset,
+            blocks: self.blocks_on as u32,
         };
         let params = upload(
             ctx,
@@ -218,6 +243,12 @@ impl DeferredPass {
             wgpu::BufferUsages::UNIFORM,
         );
         let image = self.targets.image.create_view(&Default::default());
+        // deferred.wgsl's `written`: the vertices' radiance, or the image's
+        // blocks.
+        let written = match width {
+            0 => &self.vertex_radiance,
+            _ => &self.targets.blocks,
+        };
         group(
             ctx,
             "deferred",
@@ -234,7 +265,7 @@ impl DeferredPass {
                 entry(8, scene.shading.as_entire_binding()),
                 entry(9, wgpu::BindingResource::TextureView(&self.targets.surface)),
                 entry(10, wgpu::BindingResource::TextureView(&image)),
-                entry(11, self.vertex_radiance.as_entire_binding()),
+                entry(11, written.as_entire_binding()),
             ],
         )
     }
@@ -249,7 +280,7 @@ impl DeferredPass {
         encoder: &mut wgpu::CommandEncoder,
         eye: Vec3,
     ) {
-        let group = self.group(ctx, scene, maps, eye, (0, 0));
+        let group = self.group(ctx, scene, maps, eye, (0, 0, 0.0));
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, vertices"),
             timestamp_writes: None,
@@ -313,14 +344,20 @@ impl DeferredPass {
             pass.set_bind_group(0, &surface_group, &[]);
             pass.draw(0..3 * scene.triangle_count(), 0..1);
         }
-        let size = (camera.width, camera.height);
+        let pixel = 2.0 * (0.5 * camera.fov_y).tan() / camera.height as f32;
+        let size = (camera.width, camera.height, pixel);
         let group = self.group(ctx, scene, maps, camera.eye, size);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, pixels"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&self.pixels);
         pass.set_bind_group(0, &group, &[]);
+        if self.blocks_on {
+            let (wide, high) = blocks(camera.width, camera.height);
+            pass.set_pipeline(&self.blocks);
+            pass.dispatch_workgroups(wide.div_ceil(8), high.div_ceil(8), 1);
+        }
+        pass.set_pipeline(&self.pixels);
         pass.dispatch_workgroups(camera.width.div_ceil(8), camera.height.div_ceil(8), 1);
     }
 }

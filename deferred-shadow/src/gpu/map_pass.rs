@@ -6,6 +6,7 @@
 //! are copied, not drawn.
 
 use std::num::NonZeroU64;
+use std::ops::Range;
 
 use shadow_core::gpu::GpuContext;
 use shadow_core::gpu::binding::{
@@ -16,7 +17,7 @@ use shadow_core::gpu::depth::DEPTH_FORMAT;
 use shadow_core::gpu::wgsl::Source;
 use shadow_core::{Error, Result};
 
-use super::scene::{Scene, pulled_pipeline, shader};
+use super::scene::{Scene, level_for, pulled_pipeline, shader};
 use crate::maps::{AXIS_EPSILON, Plan, TIE};
 
 shadow_core::wgsl_struct! {
@@ -42,9 +43,18 @@ struct Batch {
     /// Its first entry in the list of drawn maps.
     first: u32,
     count: u32,
-    /// (object, first instance, instance count): the object drawn into the
-    /// maps `instances[first..first + count]` name.
-    draws: Vec<(usize, u32, u32)>,
+    /// (indices, first instance, instance count): an object at one of its
+    /// levels ([`level_for`]) drawn into the maps
+    /// `instances[first..first + count]` name.
+    draws: Vec<(Range<u32>, u32, u32)>,
+}
+
+/// An object as the map pass draws it: its occluder group, and its scale
+/// (world units per model unit), which sets the level it is drawn at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlacedObject {
+    pub group: u32,
+    pub scale: f32,
 }
 
 /// Largest dispatch along y (WebGPU's default limit).
@@ -54,32 +64,48 @@ const MAX_DISPATCH: u32 = 65_535;
 const MAX_ATLAS: u32 = 8192;
 
 /// Refuses, before anything is allocated, a plan whose storage does not fit
-/// a device of `limits`: `maps` occlusion maps of `resolution`² texels, one
-/// `f32` each, in one buffer (the paper's q lights times the pairs of
-/// occluder and receiving groups, §4.2.2–4.2.3), and a mask word per
-/// triangle and light (`triangles` × `lights`, after `ranges` words of map
-/// ranges). The [`Error::InvalidConfig`] names the settings (`q`, `map`, as
-/// the harness spells them), the bytes they need and the device's limit.
+/// a device of `limits`: `maps` occlusion maps of `texels` texels in all
+/// (at most `resolution`² each), one `f32` each, in one buffer (the paper's
+/// q lights times the pairs of occluder and receiving groups,
+/// §4.2.2–4.2.3), and a mask word per triangle and light (`triangles` ×
+/// `lights`, after `ranges` words of map ranges), each batch's summed-area
+/// tables ((n + 1)² pairs of `f32` a map) at least one map's. The
+/// [`Error::InvalidConfig`] names the settings (`q`, `map`, as the harness
+/// spells them), the bytes they need and the device's limit.
 pub fn check_storage(
     lights: u32,
     resolution: u32,
-    maps: usize,
+    (maps, texels): (usize, u64),
     ranges: usize,
     triangles: usize,
     limits: &wgpu::Limits,
 ) -> Result<()> {
-    let limit = storage_limit(limits);
+    // The maps' texels are indexed by u32.
+    let limit = storage_limit(limits).min(4 * u64::from(u32::MAX));
     let what = format!(
         "the device binds at most {limit} bytes in one storage buffer \
          (the smaller of its max_storage_buffer_binding_size and max_buffer_size)"
     );
-    let map_bytes = 4 * u64::from(resolution).pow(2) * maps as u64;
+    // A tile's summed-area table, (n + 1)² corners of 8 bytes.
+    let table_bytes = 8 * (u64::from(resolution) + 1).pow(2);
+    if table_bytes > limit {
+        return Err(Error::config(
+            "deferred-shadow",
+            format!(
+                "occlusion maps of up to {resolution}×{resolution} texels (map = {resolution}) \
+                 need summed-area tables of {table_bytes} bytes each, and {what}: smaller maps \
+                 need less"
+            ),
+        ));
+    }
+    let map_bytes = 4 * texels;
     if map_bytes > limit {
         return Err(Error::config(
             "deferred-shadow",
             format!(
-                "q = {lights} area lights and {resolution}×{resolution}-texel occlusion maps \
-                 (map = {resolution}) need {maps} maps on this scene, {map_bytes} bytes, and {what}: \
+                "q = {lights} area lights and occlusion maps of up to {resolution}×{resolution} \
+                 texels (map = {resolution}) need {maps} maps on this scene, {map_bytes} bytes, \
+                 and {what}: \
                  fewer lights, smaller maps or occluders grouped (§4.2.3) need fewer"
             ),
         ));
@@ -117,7 +143,8 @@ pub(super) struct MapPass {
     pub blurred: Growing,
     /// The previous frame's maps, from which kept maps are copied.
     previous: Growing,
-    /// (previous index, index, count) of each run of kept maps.
+    /// (previous first texel, first texel, texels) of each run of kept
+    /// maps.
     copies: Vec<(u32, u32, u32)>,
     /// The maps drawn, tile after tile.
     drawn: wgpu::Buffer,
@@ -223,13 +250,14 @@ impl MapPass {
     }
 
     /// Takes `plan`: uploads its windows and ranges and lays its maps out
-    /// in atlas batches ([`super::Gpu::set_plan`]).
+    /// in atlas batches, each object drawn at the level each map needs
+    /// ([`super::Gpu::set_plan`]).
     pub fn lay_out(
         &mut self,
         ctx: &GpuContext,
-        plan: &Plan,
-        masks: &[u32],
-        groups: &[u32],
+        (plan, masks): (&Plan, &[u32]),
+        scene: &Scene,
+        objects: &[PlacedObject],
         reuse: &[Option<u32>],
     ) {
         let n = self.resolution;
@@ -240,22 +268,23 @@ impl MapPass {
         let tables = (storage_limit(&ctx.device.limits()) / table).max(1) as u32;
         let capacity = (per_row * per_row).min(MAX_DISPATCH).min(tables);
         let count = plan.maps.len() as u32;
-        let n2 = (n * n) as u64;
         // Kept maps are copied from the previous frame's array, runs of
-        // consecutive maps in one copy each.
+        // consecutive texels in one copy each.
         self.copies.clear();
-        for (k, old) in (0..count).zip(reuse) {
-            let Some(old) = *old else { continue };
+        for (map, old) in plan.maps.iter().zip(reuse) {
+            let Some(from) = *old else { continue };
             match self.copies.last_mut() {
-                Some((from, to, len)) if *from + *len == old && *to + *len == k => *len += 1,
-                _ => self.copies.push((old, k, 1)),
+                Some((start, to, len)) if *start + *len == from && *to + *len == map.offset => {
+                    *len += map.texels()
+                }
+                _ => self.copies.push((from, map.offset, map.texels())),
             }
         }
         if !self.copies.is_empty() {
             std::mem::swap(&mut self.blurred, &mut self.previous);
         }
         self.map_count = count;
-        self.blurred.reserve(ctx, 4 * n2 * count.max(1) as u64);
+        self.blurred.reserve(ctx, 4 * plan.texels().max(1));
         let drawn: Vec<u32> = (0..count)
             .filter(|&k| reuse[k as usize].is_none())
             .collect();
@@ -268,16 +297,21 @@ impl MapPass {
                 maps[k as usize].tile = tile as u32;
             }
             let mut draws = Vec::new();
-            for (object, &group) in groups.iter().enumerate() {
-                let start = instances.len() as u32;
-                instances.extend(
-                    batch
-                        .iter()
-                        .filter(|&&k| maps[k as usize].occluder == group),
-                );
-                let drawn = instances.len() as u32 - start;
-                if drawn > 0 {
-                    draws.push((object, start, drawn));
+            for (object, levels) in objects.iter().zip(&scene.occluder_levels) {
+                let mut by_level = vec![Vec::new(); levels.len()];
+                for &k in batch {
+                    let map = &maps[k as usize];
+                    if map.occluder == object.group {
+                        let texel = 1.0 / (map.inverse_side * map.resolution as f32);
+                        by_level[level_for(levels, object.scale, texel)].push(k);
+                    }
+                }
+                for (level, drawn) in levels.iter().zip(by_level) {
+                    if !drawn.is_empty() {
+                        let start = instances.len() as u32;
+                        draws.push((level.indices.clone(), start, drawn.len() as u32));
+                        instances.extend(drawn);
+                    }
                 }
             }
             self.batches.push(Batch {
@@ -366,14 +400,13 @@ impl MapPass {
                 entry(10, self.drawn.as_entire_binding()),
             ],
         });
-        let bytes = 4 * (n * n) as u64;
-        for &(old, new, count) in &self.copies {
+        for &(old, new, texels) in &self.copies {
             encoder.copy_buffer_to_buffer(
                 self.previous.buffer(),
-                old as u64 * bytes,
+                4 * u64::from(old),
                 self.blurred.buffer(),
-                new as u64 * bytes,
-                count as u64 * bytes,
+                4 * u64::from(new),
+                4 * u64::from(texels),
             );
         }
         for (b, batch) in self.batches.iter().enumerate() {
@@ -396,10 +429,9 @@ impl MapPass {
                 });
                 pass.set_pipeline(&self.cover);
                 pass.set_bind_group(0, &cover_group, &[offset]);
-                pass.set_index_buffer(scene.indices.slice(..), wgpu::IndexFormat::Uint32);
-                for &(object, first, count) in &batch.draws {
-                    let range = &scene.triangle_ranges[object];
-                    pass.draw_indexed(3 * range.start..3 * range.end, 0, first..first + count);
+                pass.set_index_buffer(scene.occluders.slice(..), wgpu::IndexFormat::Uint32);
+                for (indices, first, count) in &batch.draws {
+                    pass.draw_indexed(indices.clone(), 0, *first..first + count);
                 }
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -44,13 +44,14 @@ use shadow_core::gpu::{
 };
 use shadow_core::{Camera, Error, Result};
 
+use crate::Config;
 use crate::config::MAX_LIGHTS;
 use crate::maps::{GpuLight, MapWindow, Plan};
 use deferred_pass::DeferredPass;
 use map_pass::MapPass;
-pub use map_pass::check_storage;
+pub use map_pass::{PlacedObject, check_storage};
 use scene::Scene;
-pub use scene::{Geometry, GpuObject};
+pub use scene::{Geometry, GpuObject, LEVELS};
 
 /// Pipelines and buffers.
 pub struct Gpu {
@@ -61,20 +62,19 @@ pub struct Gpu {
 }
 
 impl Gpu {
-    /// Pipelines, and the scene's geometry uploaded.
+    /// Pipelines for `config`, and the scene's geometry uploaded.
     pub fn new(
         ctx: Arc<GpuContext>,
         geometry: &Geometry,
         objects: &[GpuObject],
-        resolution: u32,
-        self_visibility: bool,
+        config: &Config,
     ) -> Result<Gpu> {
         let owner = Arc::clone(&ctx);
         ctx.capture("deferred-shadow: pipelines and buffers", || {
             let scene = Scene::new(&ctx, geometry, objects);
             Ok(Gpu {
-                maps: MapPass::new(&ctx, resolution),
-                deferred: DeferredPass::new(&ctx, scene.vertex_count, self_visibility),
+                maps: MapPass::new(&ctx, config.map_resolution),
+                deferred: DeferredPass::new(&ctx, scene.vertex_count, config),
                 scene,
                 ctx: owner,
             })
@@ -88,7 +88,7 @@ impl Gpu {
         check_storage(
             self.scene.light_count,
             self.maps.resolution(),
-            plan.maps.len(),
+            (plan.maps.len(), plan.texels()),
             2 * plan.ranges.len(),
             self.scene.triangle_count() as usize,
             &self.ctx.device.limits(),
@@ -150,20 +150,22 @@ impl Gpu {
 
     /// Takes `plan` for the next [`Gpu::record_maps`]: uploads its windows
     /// and ranges and lays its maps out in atlas batches. `masks` are the
-    /// plan's ([`Plan::masks`]), `groups[o]` is the group of object o and
-    /// `reuse[k]` the index in the previous plan of map k when it is kept.
+    /// plan's ([`Plan::masks`]), `objects[o]` says object o's group and
+    /// scale and `reuse[k]` where map k lies in the previous plan's array
+    /// (its first texel) when it is kept.
     /// The plan must fit the device: [`Gpu::check_plan`], which the method
     /// runs before it computes the masks.
     pub fn set_plan(
         &mut self,
         plan: &Plan,
         masks: &[u32],
-        groups: &[u32],
+        objects: &[PlacedObject],
         reuse: &[Option<u32>],
     ) -> Result<()> {
         let ctx = Arc::clone(&self.ctx);
         ctx.capture("deferred-shadow: occlusion map plan", || {
-            self.maps.lay_out(&ctx, plan, masks, groups, reuse);
+            self.maps
+                .lay_out(&ctx, (plan, masks), &self.scene, objects, reuse);
             Ok(())
         })
     }
@@ -231,12 +233,17 @@ impl Gpu {
                 receiver_max: Vec4::ZERO,
                 near: 0.0,
                 far: 1.0,
-                _pad: glam::Vec2::ZERO,
+                resolution: self.maps.resolution(),
+                offset: 0,
             }],
             ranges: vec![[0, 1]],
         };
         let masks = vec![u32::MAX; self.scene.triangle_count() as usize];
-        self.set_plan(&plan, &masks, &[0], &[None])?;
+        let first = PlacedObject {
+            group: 0,
+            scale: 1.0,
+        };
+        self.set_plan(&plan, &masks, &[first], &[None])?;
         self.set_shading(&vec![0.0; 4 * self.scene.vertex_count as usize])?;
         let camera = Camera::new(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0, 4, 4)?;
         let ctx = Arc::clone(&self.ctx);

@@ -11,7 +11,8 @@ use shadow_core::gpu::GpuContext;
 use shadow_core::gpu::binding::pipeline_layout;
 use shadow_core::gpu::buffer::upload;
 use shadow_core::gpu::wgsl::Source;
-use shadow_core::{Brdf, Mesh};
+use shadow_core::simplify::simplified;
+use shadow_core::{Brdf, Mesh, Result};
 
 use crate::config::MAX_LIGHTS;
 use crate::maps::{GpuLight, MapWindow};
@@ -69,15 +70,71 @@ pub struct Geometry {
     pub triangles: Vec<[u32; 4]>,
     /// Each object's range of triangles.
     pub triangle_ranges: Vec<Range<u32>>,
+    /// The triangles drawn into the occlusion maps, as global vertex
+    /// indices: each object at every level of [`occluder_levels`].
+    pub occluders: Vec<u32>,
+    /// Per object, its levels: their ranges of `occluders` and how far
+    /// each surface may lie from the mesh's, finest first.
+    pub occluder_levels: Vec<Vec<OccluderLevel>>,
+}
+
+/// One simplification of an occluder: its range of the occluder indices
+/// and how far its surface may lie from the mesh's, in the mesh's units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OccluderLevel {
+    pub indices: Range<u32>,
+    pub error: f32,
+}
+
+/// Levels of each occluder: the mesh itself, then simplified within
+/// [`LEVEL_TEXELS`] of the finest texel its maps can have, and twice as far
+/// at each next one.
+pub const LEVELS: u32 = 6;
+
+/// The error bounds of an occluder's levels for maps of at most `largest`
+/// texels a side, in the mesh's units: 0 (the mesh), then
+/// [`LEVEL_TEXELS`] of the finest texel (a map's window is at least its
+/// occluder's bounding sphere across, maps.rs, so its texel at least the
+/// diagonal / `largest`), doubling.
+pub fn occluder_levels(mesh: &Mesh, largest: u32) -> impl Iterator<Item = f32> {
+    let finest = mesh.bounds().diagonal() / largest as f32;
+    (0..LEVELS).map(move |l| match l {
+        0 => 0.0,
+        _ => LEVEL_TEXELS * finest * (1u32 << (l - 1)) as f32,
+    })
+}
+
+/// How far, in texels of a map, the surface drawn into it may lie from
+/// the occluder's. Measured at 512×384 (per-pixel error against the
+/// reference): on `bunny` ¼ texel gave 4.48% and ½ 4.68% against 4.25%
+/// with every triangle, ⅛ 4.25% with the maps drawn in half the time; on
+/// `chess` all gave 3.9–4.1%. Where a penumbra is narrow, at a contact, a
+/// surface moved by a fraction of a texel moves the shadow's edge.
+pub const LEVEL_TEXELS: f32 = 0.125;
+
+/// The coarsest of `levels` (finest first) whose surface lies within
+/// [`LEVEL_TEXELS`] of a map with texels `texel` wide (world units), for an
+/// object of `scale` world units per model unit. The depth render of the
+/// maps is bound by triangle setup, one per occluder triangle and map: a
+/// wide light's coarse map needs few triangles, the sun's fine one keeps
+/// them.
+pub fn level_for(levels: &[OccluderLevel], scale: f32, texel: f32) -> usize {
+    levels
+        .iter()
+        .rposition(|l| l.error * scale <= LEVEL_TEXELS * texel)
+        .unwrap_or(0)
 }
 
 impl Geometry {
-    /// The meshes of a scene's objects, in order, one after another.
-    pub fn new<'a>(meshes: impl IntoIterator<Item = &'a Mesh>) -> Geometry {
+    /// The meshes of a scene's objects, in order, one after another, their
+    /// occluders simplified for maps of at most `largest` texels a side.
+    pub fn new<'a>(meshes: impl IntoIterator<Item = &'a Mesh>, largest: u32) -> Result<Geometry> {
         let mut geometry = Geometry {
             vertices: Vec::new(),
             triangles: Vec::new(),
             triangle_ranges: Vec::new(),
+            occluders: Vec::new(),
+            occluder_levels: Vec::new(),
         };
         for (o, mesh) in meshes.into_iter().enumerate() {
             let base = geometry.vertices.len() as u32;
@@ -101,8 +158,28 @@ impl Geometry {
             geometry
                 .triangle_ranges
                 .push(first..geometry.triangles.len() as u32);
+            let mut levels: Vec<OccluderLevel> = Vec::new();
+            for error in occluder_levels(mesh, largest) {
+                let drawn = simplified(mesh, error)?.triangles;
+                let count = 3 * drawn.len() as u32;
+                // A level that simplifies no further shares the one before.
+                let indices = match levels.last() {
+                    Some(last) if last.indices.len() as u32 == count => last.indices.clone(),
+                    _ => {
+                        let first = geometry.occluders.len() as u32;
+                        let ordered = meshopt::optimize_vertex_cache(
+                            drawn.as_flattened(),
+                            mesh.vertex_count(),
+                        );
+                        geometry.occluders.extend(ordered.iter().map(|&v| v + base));
+                        first..first + count
+                    }
+                };
+                levels.push(OccluderLevel { indices, error });
+            }
+            geometry.occluder_levels.push(levels);
         }
-        geometry
+        Ok(geometry)
     }
 }
 
@@ -110,9 +187,10 @@ impl Geometry {
 pub(super) struct Scene {
     pub vertices: wgpu::Buffer,
     pub triangles: wgpu::Buffer,
-    /// The triangles' global vertex indices, for indexed draws.
-    pub indices: wgpu::Buffer,
     pub triangle_ranges: Vec<Range<u32>>,
+    /// The occluders' indices at every level ([`Geometry::occluders`]).
+    pub occluders: wgpu::Buffer,
+    pub occluder_levels: Vec<Vec<OccluderLevel>>,
     pub vertex_count: u32,
     pub objects: wgpu::Buffer,
     /// [`MAX_LIGHTS`] lights (a uniform array), the first `light_count` set.
@@ -125,17 +203,18 @@ pub(super) struct Scene {
 impl Scene {
     pub fn new(ctx: &GpuContext, geometry: &Geometry, objects: &[GpuObject]) -> Scene {
         let storage = wgpu::BufferUsages::STORAGE;
-        let indices: Vec<u32> = geometry
-            .triangles
-            .iter()
-            .flat_map(|t| [t[0], t[1], t[2]])
-            .collect();
         let none: &[u32] = &[];
         Scene {
             vertices: upload(ctx, "vertices", &geometry.vertices, storage),
             triangles: upload(ctx, "triangles", &geometry.triangles, storage),
-            indices: upload(ctx, "indices", &indices, wgpu::BufferUsages::INDEX),
             triangle_ranges: geometry.triangle_ranges.clone(),
+            occluders: upload(
+                ctx,
+                "occluders",
+                &geometry.occluders,
+                wgpu::BufferUsages::INDEX,
+            ),
+            occluder_levels: geometry.occluder_levels.clone(),
             vertex_count: geometry.vertices.len() as u32,
             objects: upload(ctx, "objects", objects, storage),
             lights: upload(
@@ -204,4 +283,63 @@ pub(super) fn pulled_pipeline(
             multiview_mask: None,
             cache: None,
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use shadow_core::shapes;
+
+    /// Each level draws fewer triangles than the one before, or the same
+    /// ones, within its bound; the mesh itself first.
+    #[test]
+    fn occluders_simplify_further_at_each_level() {
+        let ball = shapes::uv_sphere("ball", Vec3::ZERO, 1.0, 32, 64).unwrap();
+        let geometry = Geometry::new([&ball], 64).unwrap();
+        let levels = &geometry.occluder_levels[0];
+        assert_eq!(levels.len(), LEVELS as usize);
+        let counts: Vec<usize> = levels.iter().map(|l| l.indices.len() / 3).collect();
+        assert_eq!(levels[0].error, 0.0);
+        assert!(counts.windows(2).all(|w| w[1] <= w[0]), "{counts:?}");
+        // Measured: 3,955, 1,549, 685, 393, 239 and 157 triangles (the
+        // coarsest within 2 texels of 64 over the ball's diagonal).
+        assert!(counts[0] >= 3900, "{counts:?}");
+        assert!(counts[LEVELS as usize - 1] < counts[0] / 8, "{counts:?}");
+        for (level, bound) in levels.iter().zip(occluder_levels(&ball, 64)) {
+            assert_eq!(level.error, bound);
+            let simplified = simplified(&ball, bound).unwrap();
+            assert!(simplified.error <= bound, "{} > {bound}", simplified.error);
+        }
+        // Every index names one of the ball's vertices.
+        assert!(
+            geometry
+                .occluders
+                .iter()
+                .all(|&v| (v as usize) < ball.vertex_count())
+        );
+    }
+
+    /// A map draws the coarsest level within an eighth of its texel, in
+    /// world units: twice the scale, one level finer; a map 16 times
+    /// coarser than the finest, the coarsest level; the finest map, the
+    /// first level past the mesh.
+    #[test]
+    fn a_map_draws_its_occluder_within_an_eighth_of_its_texel() {
+        let ball = shapes::uv_sphere("ball", Vec3::ZERO, 1.0, 32, 64).unwrap();
+        let geometry = Geometry::new([&ball], 64).unwrap();
+        let levels = &geometry.occluder_levels[0];
+        let finest = ball.bounds().diagonal() / 64.0;
+        assert_eq!(level_for(levels, 1.0, finest), 1);
+        assert_eq!(level_for(levels, 1.0, 16.0 * finest), 5);
+        assert_eq!(level_for(levels, 1.0, 4.0 * finest), 3);
+        assert_eq!(level_for(levels, 2.0, 4.0 * finest), 2);
+        // Texels finer than the finest (a map scaled down): the mesh.
+        assert_eq!(level_for(levels, 1.0, 0.5 * finest), 0);
+        for level in 0..LEVELS as usize {
+            let texel = 2f32.powi(level as i32 - 1) * finest;
+            let chosen = &levels[level_for(levels, 3.0, texel)];
+            assert!(chosen.error * 3.0 <= LEVEL_TEXELS * texel);
+        }
+    }
 }

@@ -23,14 +23,18 @@ fn filtered_maps(meshes: &[Mesh], light: GpuLight, n: u32) -> (Plan, Vec<f32>) {
     let bounds: Vec<Aabb> = meshes.iter().map(Mesh::bounds).collect();
     let groups = Groups::new(&Grouping::Overlapping { overlap: 0.5 }, &bounds).unwrap();
     let plan = Plan::new(&[light], &bounds, &groups, n);
-    let geometry = Geometry::new(meshes);
+    let geometry = Geometry::new(meshes, n).unwrap();
     let white = Brdf::lambert(Vec3::ONE).unwrap();
     let objects: Vec<GpuObject> = groups
         .of_object
         .iter()
         .map(|&g| GpuObject::new(Mat4::IDENTITY, &white, g))
         .collect();
-    let mut gpu = Gpu::new(Arc::clone(&ctx), &geometry, &objects, n, true).unwrap();
+    let config = crate::Config {
+        map_resolution: n,
+        ..crate::Config::default()
+    };
+    let mut gpu = Gpu::new(Arc::clone(&ctx), &geometry, &objects, &config).unwrap();
     gpu.set_lights(&[light]).unwrap();
     let positions: Vec<Vec3> = meshes
         .iter()
@@ -38,11 +42,15 @@ fn filtered_maps(meshes: &[Mesh], light: GpuLight, n: u32) -> (Plan, Vec<f32>) {
         .collect();
     let masks = plan.masks(&[light], &positions, &geometry.triangles, &groups.of_object);
     let reuse = vec![None; plan.maps.len()];
-    gpu.set_plan(&plan, &masks, &groups.of_object, &reuse)
-        .unwrap();
+    let placed: Vec<PlacedObject> = groups
+        .of_object
+        .iter()
+        .map(|&group| PlacedObject { group, scale: 1.0 })
+        .collect();
+    gpu.set_plan(&plan, &masks, &placed, &reuse).unwrap();
     ctx.run("test: occlusion maps", |encoder| gpu.record_maps(encoder))
         .unwrap();
-    let texels = (n * n) as usize * plan.maps.len();
+    let texels = plan.texels() as usize;
     let maps = ctx
         .read_buffer(gpu.maps.blurred.buffer(), 0, texels)
         .unwrap();
@@ -84,6 +92,7 @@ fn the_blur_ramp_across_a_sheet_edge_is_s_wide() {
     let (plan, blurred) = filtered_maps(&[floor, sheet], light, n);
     assert_eq!(plan.maps.len(), 1, "the sheet onto the floor");
     let map = plan.maps[0];
+    let n = map.resolution;
     let s = omega.sqrt() * height;
 
     // Texel k's centre along either axis, in the light's plane.
@@ -163,13 +172,13 @@ fn the_penumbra_widens_away_from_the_contact() {
     let floor = shapes::floor("floor", Vec3::ZERO, 4.0, 1).unwrap();
     let (plan, maps) = filtered_maps(&[floor, plate], light, n);
     // The plate's map onto the floor, among the plan's.
-    let (index, map) = plan
+    let map = plan
         .maps
         .iter()
         .copied()
-        .enumerate()
-        .find(|(_, m)| (m.occluder, m.receiver) == (1, 0))
+        .find(|m| (m.occluder, m.receiver) == (1, 0))
         .expect("the plate onto the floor");
+    let n = map.resolution;
     // The map at light-plane point `a`, bilinear (deferred.wgsl's map_at).
     let at = |a: Vec2| {
         let t = ((a - map.centre) * map.inverse_side + 0.5) * n as f32 - 0.5;
@@ -177,7 +186,7 @@ fn the_penumbra_widens_away_from_the_contact() {
         let (k, f) = (t.floor(), t - t.floor());
         let texel = |x: f32, y: f32| {
             let (x, y) = ((x as u32).min(n - 1), (y as u32).min(n - 1));
-            maps[index * (n * n) as usize + (y * n + x) as usize]
+            maps[(map.offset + y * n + x) as usize]
         };
         let top = texel(k.x, k.y) * (1.0 - f.x) + texel(k.x + 1.0, k.y) * f.x;
         let bottom = texel(k.x, k.y + 1.0) * (1.0 - f.x) + texel(k.x + 1.0, k.y + 1.0) * f.x;
@@ -217,7 +226,7 @@ fn the_penumbra_widens_away_from_the_contact() {
 /// storage binding of lavapipe (and of WebGPU's defaults) holds.
 /// Refused naming the settings, the bytes and the limit; 597 maps of
 /// 64² at q = 32 fit. So do masks until q × triangles words pass the
-/// limit.
+/// limit, and maps until one map's summed-area table passes it.
 #[test]
 fn plans_beyond_a_storage_binding_are_refused_by_name() {
     let limits = wgpu::Limits {
@@ -225,7 +234,14 @@ fn plans_beyond_a_storage_binding_are_refused_by_name() {
         max_buffer_size: (1 << 31) - 1,
         ..wgpu::Limits::default()
     };
-    let refused = check_storage(256, 256, 4800, 2 * 256 * 3, 20_000, &limits);
+    let refused = check_storage(
+        256,
+        256,
+        (4800, 4800 * 256 * 256),
+        2 * 256 * 3,
+        20_000,
+        &limits,
+    );
     let Err(Error::InvalidConfig { what, .. }) = refused else {
         panic!("{refused:?}")
     };
@@ -238,8 +254,8 @@ fn plans_beyond_a_storage_binding_are_refused_by_name() {
     ] {
         assert!(what.contains(named), "{named:?} not in {what:?}");
     }
-    check_storage(32, 64, 597, 2 * 32 * 3, 20_000, &limits).unwrap();
-    let masks = check_storage(256, 32, 10, 0, 150_000, &limits);
+    check_storage(32, 64, (597, 597 * 64 * 64), 2 * 32 * 3, 20_000, &limits).unwrap();
+    let masks = check_storage(256, 32, (10, 10 * 32 * 32), 0, 150_000, &limits);
     let Err(Error::InvalidConfig { what, .. }) = masks else {
         panic!("{masks:?}")
     };
@@ -247,6 +263,20 @@ fn plans_beyond_a_storage_binding_are_refused_by_name() {
         what.contains("q = 256") && what.contains("150000 triangles"),
         "{what}"
     );
+    // One 256² map's table, 528,392 bytes, in a binding of 160 KiB.
+    let small = wgpu::Limits {
+        max_storage_buffer_binding_size: 160 << 10,
+        ..limits
+    };
+    let tables = check_storage(32, 256, (36, 45_913), 2 * 32 * 2, 1_000, &small);
+    let Err(Error::InvalidConfig { what, .. }) = tables else {
+        panic!("{tables:?}")
+    };
+    assert!(
+        what.contains("256×256") && what.contains("528392 bytes each"),
+        "{what}"
+    );
+    check_storage(32, 128, (36, 30_000), 2 * 32 * 2, 1_000, &small).unwrap();
 }
 
 /// The per-vertex shading data is checked against the device before it is

@@ -9,7 +9,7 @@ use shadow_core::{Brdf, Capability, Error, Pose, Result, Scene, ShadowMethod, St
 
 use super::inputs::rigid;
 use super::{DeferredShadow, Part, Prepared, Shading};
-use crate::gpu::{Geometry, Gpu, GpuObject};
+use crate::gpu::{Geometry, Gpu, GpuObject, LEVELS};
 use crate::groups::Groups;
 use crate::name::NAME;
 use crate::transfer::{DIFFUSE_ORDER, GLOSSY_ORDER, Transfer};
@@ -71,20 +71,22 @@ impl DeferredShadow {
         let frame = scene.frame_geometry(0)?;
         let transforms: Vec<Affine3A> = Self::poses_of(&frame)?.into_iter().map(|p| p.0).collect();
         let groups = Groups::of_scene(&self.config.grouping, scene)?;
-        let geometry = Geometry::new(parts.iter().map(|p| &*p.mesh));
+        let geometry = Geometry::new(parts.iter().map(|p| &*p.mesh), self.config.map_resolution)?;
+        for (level, name) in [(0, "occluder triangles"), (LEVELS as usize - 1, "coarsest")] {
+            let triangles = geometry
+                .occluder_levels
+                .iter()
+                .map(|l| l[level].indices.len() / 3);
+            self.profile
+                .count(Stage::Prepare, name, triangles.sum::<usize>() as u64);
+        }
         let objects: Vec<GpuObject> = parts
             .iter()
             .zip(&transforms)
             .zip(&groups.of_object)
             .map(|((part, t), &g)| GpuObject::new(Mat4::from(*t), &part.material, g))
             .collect();
-        let mut gpu = Gpu::new(
-            Arc::clone(&self.ctx),
-            &geometry,
-            &objects,
-            self.config.map_resolution,
-            self.config.self_visibility,
-        )?;
+        let mut gpu = Gpu::new(Arc::clone(&self.ctx), &geometry, &objects, &self.config)?;
         gpu.check_shading(self.config.lights)?;
         self.profile.seconds(
             Stage::Prepare,

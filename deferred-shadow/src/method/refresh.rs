@@ -8,6 +8,7 @@ use glam::{Affine3A, Mat3, Vec3};
 use shadow_core::{Aabb, Result, Stage};
 
 use super::{DeferredShadow, Part, SelfRadiance, Shading};
+use crate::gpu::PlacedObject;
 use crate::groups::posed_bounds;
 use crate::maps::Plan;
 use crate::transfer::{Lighting, diffuse, glossy};
@@ -85,10 +86,17 @@ impl DeferredShadow {
             &scene.triangles,
             &scene.groups.of_object,
         );
-        if let Err(e) = scene
-            .gpu
-            .set_plan(&plan, &masks, &scene.groups.of_object, &reuse)
-        {
+        let objects: Vec<PlacedObject> = scene
+            .groups
+            .of_object
+            .iter()
+            .zip(&posed.transforms)
+            .map(|(&group, t)| PlacedObject {
+                group,
+                scale: t.matrix3.x_axis.length(),
+            })
+            .collect();
+        if let Err(e) = scene.gpu.set_plan(&plan, &masks, &objects, &reuse) {
             // The maps on the GPU may be partly this plan's: keep none.
             posed.planned = None;
             return Err(e);
@@ -97,6 +105,8 @@ impl DeferredShadow {
             .seconds(stage, "map planning (CPU)", start.elapsed().as_secs_f64());
         self.profile
             .count(stage, "occlusion maps", plan.maps.len() as u64);
+        self.profile
+            .count(stage, "occlusion map texels", plan.texels());
         self.profile.count(
             stage,
             "occlusion maps drawn",

@@ -1,6 +1,7 @@
 // Occlusion maps (§4.2.2, §6.2.1): occluders projected along each light onto
 // their tile of a depth atlas (the height x·ω of the occluder's surface
-// farthest from the light), then filtered into one array of maps by a box (eq. 5–6) whose
+// farthest from the light; a tile holds `atlas.resolution`² texels, a map
+// its own `resolution`² in the tile's corner), then filtered into one array of maps by a box (eq. 5–6) whose
 // side follows each texel's occluder distance: percentage-closer soft
 // shadows on a summed-area table (maps.rs says where this departs from the
 // paper's one box per map).
@@ -38,11 +39,12 @@ fn cover(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: 
     let light = lights[map.light];
     let uv = (vec2<f32>(dot(x, light.u.xyz), dot(x, light.v.xyz)) - map.centre) * map.inverse_side + 0.5;
     let origin = tile_origin(map.tile);
-    let texel = origin + uv * f32(atlas.resolution);
+    let side = f32(map.resolution);
+    let texel = origin + uv * side;
     var out: Covered;
     let depth = (map.far - dot(x, light.direction.xyz)) / (map.far - map.near);
     out.position = vec4<f32>(texel.x / atlas.side * 2.0 - 1.0, 1.0 - texel.y / atlas.side * 2.0, depth, 1.0);
-    out.tile = vec4<f32>(origin, origin + f32(atlas.resolution));
+    out.tile = vec4<f32>(origin, origin + side);
     return out;
 }
 
@@ -84,7 +86,7 @@ fn receiver_height(m: MapWindow, light: GpuLight, a: vec2<f32>) -> f32 {
 
 // Texel (x, y)'s centre in the light's plane.
 fn plane_point(m: MapWindow, x: u32, y: u32) -> vec2<f32> {
-    let uv = (vec2<f32>(f32(x), f32(y)) + 0.5) / f32(atlas.resolution) - 0.5;
+    let uv = (vec2<f32>(f32(x), f32(y)) + 0.5) / f32(m.resolution) - 0.5;
     return m.centre + uv / m.inverse_side;
 }
 
@@ -94,12 +96,14 @@ fn table_base(tile: u32) -> u32 {
 }
 
 // Row pass: gid.x the row, gid.y the tile. Entry (y + 1, x + 1) of the
-// table gets the sum along row y up to texel x.
+// table (rows of n + 1 entries, n the map's resolution) gets the sum along
+// row y up to texel x.
 @compute @workgroup_size(64)
 fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let n = atlas.resolution;
     let y = gid.x;
     let tile = gid.y;
+    let m = maps[drawn[atlas.first + tile]];
+    let n = m.resolution;
     if y > n {
         return;
     }
@@ -111,7 +115,6 @@ fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         return;
     }
-    let m = maps[drawn[atlas.first + tile]];
     let light = lights[m.light];
     let origin = vec2<u32>(tile_origin(tile));
     var sum = vec2<f32>(0.0);
@@ -132,7 +135,7 @@ fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
 // table, in place.
 @compute @workgroup_size(64)
 fn sum_columns(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let n = atlas.resolution;
+    let n = maps[drawn[atlas.first + gid.y]].resolution;
     let x = gid.x;
     if x > n {
         return;
@@ -145,19 +148,20 @@ fn sum_columns(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// The table at a corner of the texel grid, clamped to the map.
-fn table_corner(base: u32, k: vec2<i32>) -> vec2<f32> {
-    let c = vec2<u32>(clamp(k, vec2<i32>(0), vec2<i32>(i32(atlas.resolution))));
-    return table[base + c.y * (atlas.resolution + 1u) + c.x];
+// The table of a map of `n`² texels at a corner of the texel grid, clamped
+// to the map.
+fn table_corner(base: u32, n: u32, k: vec2<i32>) -> vec2<f32> {
+    let c = vec2<u32>(clamp(k, vec2<i32>(0), vec2<i32>(i32(n))));
+    return table[base + c.y * (n + 1u) + c.x];
 }
 
 // The covered fraction of the box of side 2r + 1 texels centred on texel
 // `xy` (what lies outside the map counts as open).
-fn box_mean(base: u32, xy: vec2<i32>, r: i32) -> f32 {
+fn box_mean(base: u32, n: u32, xy: vec2<i32>, r: i32) -> f32 {
     let lo = xy - r;
     let hi = xy + 1 + r;
-    let sum = table_corner(base, hi).x - table_corner(base, vec2<i32>(lo.x, hi.y)).x
-        - table_corner(base, vec2<i32>(hi.x, lo.y)).x + table_corner(base, lo).x;
+    let sum = table_corner(base, n, hi).x - table_corner(base, n, vec2<i32>(lo.x, hi.y)).x
+        - table_corner(base, n, vec2<i32>(hi.x, lo.y)).x + table_corner(base, n, lo).x;
     let side = f32(2 * r + 1);
     return sum / (side * side);
 }
@@ -171,13 +175,12 @@ fn box_mean(base: u32, xy: vec2<i32>, r: i32) -> f32 {
 // least the texel itself: below a texel's side the box sees only it).
 @compute @workgroup_size(64)
 fn filter_maps(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let n = atlas.resolution;
+    let m = maps[drawn[atlas.first + gid.y]];
+    let n = m.resolution;
     let y = gid.x;
     if y >= n {
         return;
     }
-    let id = drawn[atlas.first + gid.y];
-    let m = maps[id];
     let light = lights[m.light];
     let base = table_base(gid.y);
     for (var x = 0u; x < n; x++) {
@@ -186,8 +189,8 @@ fn filter_maps(@builtin(global_invocation_id) gid: vec3<u32>) {
         let xy = vec2<i32>(i32(x), i32(y));
         let lo = xy - reach;
         let hi = xy + 1 + reach;
-        let blockers = table_corner(base, hi) - table_corner(base, vec2<i32>(lo.x, hi.y))
-            - table_corner(base, vec2<i32>(hi.x, lo.y)) + table_corner(base, lo);
+        let blockers = table_corner(base, n, hi) - table_corner(base, n, vec2<i32>(lo.x, hi.y))
+            - table_corner(base, n, vec2<i32>(hi.x, lo.y)) + table_corner(base, n, lo);
         // Outside the penumbra the widest box decides alone: no blocker in
         // it leaves the texel open, and all of it covered covers every
         // narrower box too.
@@ -200,8 +203,8 @@ fn filter_maps(@builtin(global_invocation_id) gid: vec3<u32>) {
             // the sixteen of a box with fractional corners.
             let r = 0.5 * (max(m.spread * d, 1.0) - 1.0);
             let r0 = i32(floor(r));
-            occlusion = mix(box_mean(base, xy, r0), box_mean(base, xy, r0 + 1), r - f32(r0));
+            occlusion = mix(box_mean(base, n, xy, r0), box_mean(base, n, xy, r0 + 1), r - f32(r0));
         }
-        blurred[id * n * n + y * n + x] = clamp(occlusion, 0.0, 1.0);
+        blurred[m.offset + y * n + x] = clamp(occlusion, 0.0, 1.0);
     }
 }
