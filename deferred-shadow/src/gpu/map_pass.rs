@@ -165,6 +165,7 @@ impl MapPass {
             .float("AXIS_EPSILON", AXIS_EPSILON)
             .float("TIE", TIE)
             .declare::<Atlas>()
+            .body(include_str!("../shaders/receiver.wgsl"))
             .body(include_str!("../shaders/maps.wgsl"));
         let module = shader(ctx, "occlusion maps", body);
         let cover_layout = group_layout(

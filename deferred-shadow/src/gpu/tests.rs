@@ -298,3 +298,135 @@ fn shading_data_beyond_a_storage_binding_is_refused_by_name() {
         "{what}"
     );
 }
+
+/// maps.wgsl's receiver height (receiver.wgsl) is maps.rs's: on boxes
+/// flat and deep, lines through them and past their silhouettes, under
+/// slanted lights and lights along an axis (whose other components fall
+/// below `AXIS_EPSILON`), the GPU's heights equal the CPU's to within the
+/// rounding of f32 at the box's size, 10⁻⁵ of the box's diagonal plus the
+/// point's distance (measured on lavapipe: all 672 equal).
+#[test]
+#[cfg_attr(
+    skip_gpu_tests,
+    ignore = "needs a GPU adapter (SOFT_SHADOWS_SKIP lists gpu)"
+)]
+fn receiver_heights_agree_on_the_cpu_and_the_gpu() {
+    use shadow_core::gpu::binding::{compute_pipeline, entry, group, group_layout, storage};
+    use shadow_core::gpu::buffer::{blank, upload};
+    use shadow_core::gpu::wgsl::Source;
+
+    let ctx = test_context();
+    let directions = [
+        Vec3::Y,
+        -Vec3::Y,
+        Vec3::X,
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(-0.3, 0.8, 0.5),
+        Vec3::new(0.2, -0.1, -0.97),
+        Vec3::new(1e-7, 1.0, -1e-7),
+    ];
+    let boxes = [
+        (Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 0.0, 1.0)),
+        (Vec3::splat(-0.5), Vec3::splat(0.5)),
+        (Vec3::new(2.0, -1.0, 3.0), Vec3::new(2.5, 4.0, 3.1)),
+        (Vec3::splat(1e3), Vec3::splat(1e3 + 0.2)),
+    ];
+    let (mut windows, mut lights, mut points, mut expected) = (vec![], vec![], vec![], vec![]);
+    for (d, &direction) in directions.iter().enumerate() {
+        let light = GpuLight::new(&AreaLight {
+            direction: direction.normalize(),
+            radiosity: Vec3::ONE,
+            solid_angle: 0.1,
+            extent: 0.1,
+        });
+        let (u, v) = (light.u.truncate(), light.v.truncate());
+        for &(min, max) in &boxes {
+            let centre = 0.5 * (min + max);
+            let size = (max - min).length().max(1e-3);
+            for k in 0..24 {
+                // Points over the box and up to its size beyond it.
+                let t = k as f32 / 23.0;
+                let a = Vec2::new(centre.dot(u), centre.dot(v))
+                    + 1.5 * size * Vec2::new((7.0 * t).sin(), (11.0 * t + d as f32).cos());
+                let o = a.x * u + a.y * v;
+                windows.push(MapWindow {
+                    receiver_min: min.extend(0.0),
+                    receiver_max: max.extend(0.0),
+                    ..bytemuck::Zeroable::zeroed()
+                });
+                lights.push(light);
+                points.push(a);
+                let height = crate::maps::receiver_height(o, light.direction.truncate(), min, max);
+                expected.push((height, size + o.length()));
+            }
+        }
+    }
+    let body = Source::new()
+        .float("AXIS_EPSILON", crate::maps::AXIS_EPSILON)
+        .body(include_str!("../shaders/receiver.wgsl"))
+        .body(
+            "@group(0) @binding(0) var<storage, read> windows: array<MapWindow>;
+             @group(0) @binding(1) var<storage, read> tested: array<GpuLight>;
+             @group(0) @binding(2) var<storage, read> points: array<vec2<f32>>;
+             @group(0) @binding(3) var<storage, read_write> heights: array<f32>;
+             @compute @workgroup_size(64)
+             fn heights_at(@builtin(global_invocation_id) gid: vec3<u32>) {
+                 if gid.x < arrayLength(&points) {
+                     heights[gid.x] = receiver_height(windows[gid.x], tested[gid.x], points[gid.x]);
+                 }
+             }",
+        );
+    let module = super::scene::shader(&ctx, "receiver heights", body);
+    let cs = wgpu::ShaderStages::COMPUTE;
+    let layout = group_layout(
+        &ctx,
+        "receiver heights",
+        &[
+            storage(0, true, cs),
+            storage(1, true, cs),
+            storage(2, true, cs),
+            storage(3, false, cs),
+        ],
+    );
+    let pipeline = compute_pipeline(&ctx, &layout, &module, "heights_at");
+    let storage_usage = wgpu::BufferUsages::STORAGE;
+    let inputs = [
+        upload(&ctx, "windows", &windows, storage_usage),
+        upload(&ctx, "lights", &lights, storage_usage),
+        upload(&ctx, "points", &points, storage_usage),
+    ];
+    let heights = blank(
+        &ctx,
+        "heights",
+        4 * points.len() as u64,
+        storage_usage | wgpu::BufferUsages::COPY_SRC,
+    );
+    let bindings = group(
+        &ctx,
+        "receiver heights",
+        &layout,
+        &[
+            entry(0, inputs[0].as_entire_binding()),
+            entry(1, inputs[1].as_entire_binding()),
+            entry(2, inputs[2].as_entire_binding()),
+            entry(3, heights.as_entire_binding()),
+        ],
+    );
+    ctx.run("test: receiver heights", |encoder| {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bindings, &[]);
+        pass.dispatch_workgroups((points.len() as u32).div_ceil(64), 1, 1);
+        Ok(())
+    })
+    .unwrap();
+    let gpu: Vec<f32> = ctx.read_buffer(&heights, 0, points.len()).unwrap();
+    let mut worst = 0.0f32;
+    for (k, (&got, &(want, scale))) in gpu.iter().zip(&expected).enumerate() {
+        assert!(want.is_finite(), "point {k}: {want}");
+        let off = (got - want).abs() / scale;
+        worst = worst.max(off);
+        assert!(off < 1e-5, "point {k}: GPU {got}, CPU {want}");
+    }
+    println!("{} heights, worst {worst:e} of the scale", gpu.len());
+}

@@ -6,7 +6,8 @@
 // shadows on a summed-area table (maps.rs says where this departs from the
 // paper's one box per map).
 
-// Atlas, AXIS_EPSILON and TIE are declared from Rust (gpu/map_pass.rs).
+// Atlas, AXIS_EPSILON and TIE are declared from Rust (gpu/map_pass.rs);
+// receiver_height comes before this file (receiver.wgsl).
 
 @group(0) @binding(0) var<uniform> atlas: Atlas;
 @group(0) @binding(1) var<storage, read> vertices: array<GpuVertex>;
@@ -64,25 +65,6 @@ fn covered(in: Covered) {
 // The maps drawn, by tile: batch `atlas.first`'s tile t is map
 // `drawn[atlas.first + t]`.
 @group(0) @binding(10) var<storage, read> drawn: array<u32>;
-
-// The larger of the line's two crossings of the slab [lo, hi] along an
-// axis where it moves by w per unit of height, from o (none: +∞).
-fn slab_exit(lo: f32, hi: f32, o: f32, w: f32) -> f32 {
-    if abs(w) <= AXIS_EPSILON {
-        return 3.0e38;
-    }
-    return max((lo - o) / w, (hi - o) / w);
-}
-
-// The light-facing side of the receiver's box on the line through
-// light-plane point `a` (maps.rs's `receiver_height`).
-fn receiver_height(m: MapWindow, light: GpuLight, a: vec2<f32>) -> f32 {
-    let o = a.x * light.u.xyz + a.y * light.v.xyz;
-    let w = light.direction.xyz;
-    let lo = m.receiver_min.xyz;
-    let hi = m.receiver_max.xyz;
-    return min(min(slab_exit(lo.x, hi.x, o.x, w.x), slab_exit(lo.y, hi.y, o.y, w.y)), slab_exit(lo.z, hi.z, o.z, w.z));
-}
 
 // Texel (x, y)'s centre in the light's plane.
 fn plane_point(m: MapWindow, x: u32, y: u32) -> vec2<f32> {
