@@ -42,11 +42,11 @@ pub struct Config {
     pub window: Window,
     /// The outgoing light's loss L_o evaluated at one pixel of each 2×2
     /// block and shared with the pixels around it that lie on the same
-    /// surface where the blocks agree (within 5% of the pixel's L_s),
-    /// evaluated at the pixel elsewhere: shadow edges, silhouettes and
-    /// creases stay per pixel. At 512×384 (AVX2 host, lavapipe, runs
-    /// alternated) the render takes about 145 ms instead of 200 on `chess`
-    /// at 3.94–4.23% image error instead of 3.88–4.09%, 110 instead of 158
+    /// surface where at least two blocks agree (within 5% of the pixel's
+    /// L_s), evaluated at the pixel elsewhere: shadow edges, silhouettes
+    /// and creases stay per pixel. At 512×384 (AVX2 host, lavapipe, runs
+    /// alternated) the render takes about 148 ms instead of 205 on `chess`
+    /// at 3.92–4.20% image error instead of 3.88–4.09%, 102 instead of 136
     /// on `bunny` at 4.11% instead of 4.06%: off by default, since it does
     /// not keep the error. A shadow narrower than a block (at a contact)
     /// can be missed.

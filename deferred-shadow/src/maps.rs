@@ -238,11 +238,11 @@ impl Plan {
     }
 
     /// For each map, where the same map lies in `previous`'s array of maps
-    /// (its first texel) when it can be kept: same receiver, light and
-    /// occluder, neither group moved (`moved[g]`) and the lights did not
-    /// change since `previous`.
+    /// (its first texel) when it can be kept: same receiver, light,
+    /// occluder and resolution, neither group moved (`moved[g]`) and the
+    /// lights did not change since `previous`.
     pub fn reuse(&self, previous: &Plan, moved: &[bool]) -> Vec<Option<u32>> {
-        let key = |m: &MapWindow| (m.receiver, m.light, m.occluder);
+        let key = |m: &MapWindow| (m.receiver, m.light, m.occluder, m.resolution);
         let old: std::collections::HashMap<_, u32> =
             previous.maps.iter().map(|m| (key(m), m.offset)).collect();
         self.maps
@@ -268,8 +268,8 @@ fn sphere(b: &Aabb) -> (Vec3, f32) {
 /// gave 5.07 / 3.97 / 3.49% and 3.91–4.14%.
 pub const PENUMBRA_TEXELS: f32 = 8.0;
 
-/// Where the paper gives every map one resolution (§6.2.1, 128² texels),
-/// here a map has the fewest texels, at most `largest`, that give the
+/// Where the paper gives every map of a frame one resolution (§7 compares
+/// 32², 64² and 128²), here a map has the fewest texels, at most `largest`, that give the
 /// penumbra its occluder casts at the occluder's radius r (√E_i · r, the
 /// light's extent E_i) [`PENUMBRA_TEXELS`] texels across its window of
 /// side `window`: sharper shadow within that distance of a contact is
@@ -487,10 +487,11 @@ mod tests {
         // The sun (6.8·10⁻⁵ sr) and a point: all 64.
         assert_eq!(resolution(64, 1.5, 6.8e-5f32.sqrt(), 1.0), 64);
         assert_eq!(resolution(64, 1.5, 0.0, 1.0), 64);
-        // Half the sky: 4 texels, the least, or fewer where fewer are
+        // Half the sky over a window twice the occluder's radius: 8 · 1 /
+        // 3.5 would be 2 texels; 4, the least, or fewer where fewer are
         // allowed.
-        assert_eq!(resolution(64, 1.0, 2.5, 1.0), 4);
-        assert_eq!(resolution(2, 1.0, 2.5, 1.0), 2);
+        assert_eq!(resolution(64, 1.0, 3.5, 1.0), 4);
+        assert_eq!(resolution(2, 1.0, 3.5, 1.0), 2);
     }
 
     /// Which side of a pair is in front is decided where the occluder

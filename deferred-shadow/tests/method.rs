@@ -930,10 +930,11 @@ fn blocks_share_the_loss_where_they_agree() {
         "{differing} of {covered} pixels from the blocks, {relative} apart, \
          {far_off} more than 5% of the brightest off, worst {worst}"
     );
-    // Measured: 11,450 of 12,084 pixels from the blocks, 0.37% apart; 2
-    // pixels more than 5% of the brightest off (the shadow under the
-    // ball's contact, narrower than a block), the worst 20%.
+    // Measured: 11,442 of 12,084 pixels differ from the per-pixel image,
+    // 0.27% apart; 1 pixel more than 5% of the brightest off (the shadow
+    // under the ball's contact, narrower than a block), by 18%. With one
+    // block enough: 0.37%, 2 pixels, 20%.
     assert!(differing > covered / 2, "{differing} of {covered}");
-    assert!(relative < 0.01, "{relative}");
-    assert!(far_off <= 10 && worst < 0.3, "{far_off} pixels, {worst}");
+    assert!(relative < 0.005, "{relative}");
+    assert!(far_off <= 3 && worst < 0.25, "{far_off} pixels, {worst}");
 }

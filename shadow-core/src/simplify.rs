@@ -16,8 +16,8 @@ pub const MIN_TRIANGLES: usize = 64;
 pub struct Simplified {
     /// Triangles over the mesh's own vertices.
     pub triangles: Vec<[u32; 3]>,
-    /// meshopt's bound on the distance between the two surfaces, in the
-    /// mesh's units.
+    /// meshopt's estimate of the distance between the two surfaces (from
+    /// its quadrics), in the mesh's units.
     pub error: f32,
 }
 

@@ -23,6 +23,7 @@ shadow_core::wgsl_struct! {
     #[repr(C)]
     #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
     struct Params {
+        /// The eye; w: a pixel's width at unit distance from it.
         eye: Vec4,
         lights: u32,
         self_visibility: u32,
@@ -65,6 +66,15 @@ pub(super) struct Targets {
     image: wgpu::Texture,
     /// deferred.wgsl's `Block` (two `vec4`) per 2×2 block of pixels.
     blocks: wgpu::Buffer,
+}
+
+/// What a recording of the deferred pass shades: the vertices (the image
+/// targets bound unused), or an image of `width` × `height` whose pixels
+/// are `pixel` wide at unit distance from the eye.
+#[derive(Clone, Copy, Debug)]
+enum Target {
+    Vertices,
+    Image { width: u32, height: u32, pixel: f32 },
 }
 
 /// Blocks of 2×2 pixels across and down an image.
@@ -215,16 +225,23 @@ impl DeferredPass {
     }
 
     /// The deferred pass's bindings, with this recording's parameters for
-    /// `eye` and a `width` × `height` image (none: the per-vertex pass,
-    /// which binds the image targets unused).
+    /// `eye` and `target`.
     fn group(
         &self,
         ctx: &GpuContext,
         scene: &Scene,
         maps: &MapPass,
         eye: Vec3,
-        (width, height, pixel_angle): (u32, u32, f32),
+        target: Target,
     ) -> wgpu::BindGroup {
+        let (width, height, pixel_angle) = match target {
+            Target::Vertices => (0, 0, 0.0),
+            Target::Image {
+                width,
+                height,
+                pixel,
+            } => (width, height, pixel),
+        };
         let params = Params {
             eye: eye.extend(pixel_angle),
             lights: scene.light_count,
@@ -245,9 +262,9 @@ impl DeferredPass {
         let image = self.targets.image.create_view(&Default::default());
         // deferred.wgsl's `written`: the vertices' radiance, or the image's
         // blocks.
-        let written = match width {
-            0 => &self.vertex_radiance,
-            _ => &self.targets.blocks,
+        let written = match target {
+            Target::Vertices => &self.vertex_radiance,
+            Target::Image { .. } => &self.targets.blocks,
         };
         group(
             ctx,
@@ -280,7 +297,7 @@ impl DeferredPass {
         encoder: &mut wgpu::CommandEncoder,
         eye: Vec3,
     ) {
-        let group = self.group(ctx, scene, maps, eye, (0, 0, 0.0));
+        let group = self.group(ctx, scene, maps, eye, Target::Vertices);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, vertices"),
             timestamp_writes: None,
@@ -344,9 +361,12 @@ impl DeferredPass {
             pass.set_bind_group(0, &surface_group, &[]);
             pass.draw(0..3 * scene.triangle_count(), 0..1);
         }
-        let pixel = 2.0 * (0.5 * camera.fov_y).tan() / camera.height as f32;
-        let size = (camera.width, camera.height, pixel);
-        let group = self.group(ctx, scene, maps, camera.eye, size);
+        let target = Target::Image {
+            width: camera.width,
+            height: camera.height,
+            pixel: 2.0 * (0.5 * camera.fov_y).tan() / camera.height as f32,
+        };
+        let group = self.group(ctx, scene, maps, camera.eye, target);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("deferred pass, pixels"),
             timestamp_writes: None,

@@ -244,10 +244,12 @@ fn at_blocks(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // L_o at a pixel (`s`, on `object`) from the blocks around it that sample
-// its surface, bilinearly, or none (w < 0) where no block does or they
+// its surface, bilinearly, or none (w < 0) where fewer than two do or they
 // disagree by more than EDGE of the pixel's L_s (a shadow's edge).
 fn lost_from_blocks(xy: vec2<u32>, s: Visible, object: u32, ls: vec3<f32>) -> vec4<f32> {
-    // The pixel's centre on the grid of block samples.
+    // The pixel on the grid of the blocks' centres (a block's sample is its
+    // first pixel that sees a surface: taken as its centre, it is at most a
+    // pixel off, and the pixels' own block weighs most).
     let f = (vec2<f32>(xy) + 0.5) * 0.5 - 0.5;
     let first = vec2<i32>(floor(f));
     let along = f - floor(f);
@@ -258,6 +260,7 @@ fn lost_from_blocks(xy: vec2<u32>, s: Visible, object: u32, ls: vec3<f32>) -> ve
     let reach = 4.0 * params.eye.w * distance(params.eye.xyz, s.p);
     var sum = vec3<f32>(0.0);
     var total = 0.0;
+    var agreeing = 0u;
     var lowest = vec3<f32>(3.0e38);
     var highest = vec3<f32>(0.0);
     for (var k = 0; k < 4; k++) {
@@ -274,10 +277,12 @@ fn lost_from_blocks(xy: vec2<u32>, s: Visible, object: u32, ls: vec3<f32>) -> ve
         let weight = w.x * w.y;
         sum += weight * block.lost.rgb;
         total += weight;
+        agreeing += 1u;
         lowest = min(lowest, block.lost.rgb);
         highest = max(highest, block.lost.rgb);
     }
-    if total < 0.01 || any(highest - lowest > EDGE * max(ls, vec3<f32>(1e-30))) {
+    // One block alone has nothing to agree with.
+    if agreeing < 2u || total < 0.01 || any(highest - lowest > EDGE * max(ls, vec3<f32>(1e-30))) {
         return vec4<f32>(0.0, 0.0, 0.0, -1.0);
     }
     return vec4<f32>(sum / total, 1.0);
