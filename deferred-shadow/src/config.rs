@@ -25,8 +25,9 @@ pub enum Grouping {
 pub struct Config {
     /// q, the number of area lights the environment is split into (§4.2.1).
     pub lights: usize,
-    /// Side of each square occlusion map, texels (§4.2.2; the paper: 32, 64,
-    /// 128).
+    /// The largest side of a square occlusion map, texels (§4.2.2; the
+    /// paper gives every map this side: 32, 64, 128); each map has the
+    /// fewest its penumbra needs up to it (`maps::resolution`).
     pub map_resolution: u32,
     /// Shadow rays per vertex for the self-transfer precomputation
     /// (cosine-distributed, stratified).

@@ -298,7 +298,7 @@ const DEPTH_ROUNDING: f32 = 4.0 * f32::EPSILON;
 
 impl Plan {
     /// The maps between the groups of objects with bounds `objects` under
-    /// `lights`, at most `largest` texels a side ([`resolution`]).
+    /// `lights`, at most `largest` texels a side (`resolution`).
     pub fn new(lights: &[GpuLight], objects: &[Aabb], groups: &Groups, largest: u32) -> Plan {
         let q = lights.len();
         let boxes: Vec<Aabb> = groups
