@@ -130,6 +130,11 @@ impl MapWindow {
     pub fn texels(&self) -> u32 {
         self.resolution * self.resolution
     }
+
+    /// A texel's side, world units.
+    pub fn texel(&self) -> f32 {
+        1.0 / (self.inverse_side * self.resolution as f32)
+    }
 }
 
 /// Where the line {o + t ω} last leaves the box [min, max] toward the

@@ -303,8 +303,7 @@ impl MapPass {
                 for &k in batch {
                     let map = &maps[k as usize];
                     if map.occluder == object.group {
-                        let texel = 1.0 / (map.inverse_side * map.resolution as f32);
-                        by_level[level_for(levels, object.scale, texel)].push(k);
+                        by_level[level_for(levels, object.scale, map.texel())].push(k);
                     }
                 }
                 for (level, drawn) in levels.iter().zip(by_level) {
